@@ -1,0 +1,419 @@
+# PPO expert that produces the demonstrations (paper section 5.1, "Data collection"); see README.md
+"""Proximal Policy Optimisation for gymnasium 1.x MuJoCo envs, CleanRL style, in one file.
+
+Train:     python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
+Resume:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
+Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
+
+The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_only=True) reads it):
+the actor, the frozen observation-normalisation statistics, the action bounds, env id, shapes, args,
+step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
+"""
+import os
+import random
+import sys
+import time
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import tyro
+
+gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+
+
+@dataclass
+class Args:
+    env: str = "Hopper-v4"
+    """gymnasium MuJoCo env id with continuous actions (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    seed: int = 1
+    """seed of the run (python, numpy, torch and the envs)"""
+    total_timesteps: int = 3_000_000
+    """env steps to train for, summed over the parallel envs"""
+    learning_rate: float = 3e-4
+    """Adam learning rate, annealed linearly to zero over total-timesteps"""
+    num_envs: int = 8
+    """parallel envs in the (synchronous) vector env"""
+    num_steps: int = 256
+    """steps per env per rollout; a rollout holds num-envs * num-steps transitions"""
+    gamma: float = 0.99
+    """discount factor"""
+    gae_lambda: float = 0.95
+    """lambda of generalised advantage estimation"""
+    num_minibatches: int = 32
+    """minibatches per epoch over one rollout"""
+    update_epochs: int = 10
+    """epochs over each rollout"""
+    clip_coef: float = 0.2
+    """PPO ratio clipping"""
+    ent_coef: float = 0.0
+    """entropy bonus"""
+    vf_coef: float = 0.5
+    """weight of the value loss"""
+    max_grad_norm: float = 0.5
+    """gradient-norm clipping"""
+    hidden: int = 64
+    """width of the two tanh hidden layers of actor and critic"""
+    run_dir: str = "runs/expert_ppo/{env}__{seed}"
+    """where training writes latest.pt (to resume) and best.pt (best periodic evaluation)"""
+    save_every: int = 100_000
+    """write latest.pt every this many env steps"""
+    eval_every: int = 250_000
+    """evaluate the deterministic policy every this many env steps and keep the best as best.pt"""
+    train_eval_episodes: int = 5
+    """episodes of each periodic evaluation during training"""
+    resume: bool = False
+    """continue from run-dir/latest.pt when it exists (start fresh otherwise)"""
+    max_minutes: float = 0.0
+    """stop cleanly (checkpoint written) after this many minutes; 0 = no limit. Resume later."""
+    threads: int = 1
+    """torch CPU threads; 1 is fastest for these small networks and lets several runs share a machine"""
+    eval_only: bool = False
+    """only evaluate --checkpoint, printing per-episode returns and a summary line"""
+    checkpoint: str = "experts/{env}.pt"
+    """checkpoint evaluated by --eval-only"""
+    eval_episodes: int = 20
+    """episodes of --eval-only and of the final evaluation after training"""
+
+
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Env
+
+
+def check_env(env_id: str) -> gym.Env:
+    """Make one env, failing with a clear message for unknown ids and discrete action spaces."""
+    try:
+        env = gym.make(env_id)
+    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: PPO here needs continuous (Box) actions")
+    return env
+
+
+class RunningMeanStd:
+    """Running mean and variance (parallel algorithm of Chan et al.), as in gymnasium's normalisers."""
+
+    def __init__(self, shape=()):
+        self.mean, self.var, self.count = np.zeros(shape), np.ones(shape), 1e-4
+
+    def update(self, batch: np.ndarray):
+        batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
+        delta, total = batch_mean - self.mean, self.count + batch_count
+        self.mean = self.mean + delta * batch_count / total
+        self.var = (self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total) / total
+        self.count = total
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# Networks
+
+
+def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:
+    """Two tanh hidden layers with orthogonal init (the PPO implementation details of Huang et al.)."""
+    layers = [nn.Linear(in_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, out_dim)]
+    for layer, std in zip(layers[::2], (np.sqrt(2), np.sqrt(2), last_std)):
+        nn.init.orthogonal_(layer.weight, std)
+        nn.init.zeros_(layer.bias)
+    return nn.Sequential(*layers)
+
+
+class Agent(nn.Module):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: int):
+        super().__init__()
+        self.critic = mlp(obs_dim, 1, hidden, 1.0)
+        self.actor_mean = mlp(obs_dim, act_dim, hidden, 0.01)
+        self.actor_logstd = nn.Parameter(torch.zeros(1, act_dim))
+
+    def value(self, obs):
+        return self.critic(obs).squeeze(-1)
+
+    def action_and_value(self, obs, action=None):
+        mean = self.actor_mean(obs)
+        dist = torch.distributions.Normal(mean, self.actor_logstd.expand_as(mean).exp())
+        if action is None:
+            action = dist.sample()
+        return action, dist.log_prob(action).sum(-1), dist.entropy().sum(-1), self.value(obs)
+
+
+class ExpertPolicy(nn.Module):
+    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+
+    def __init__(self, checkpoint: dict):
+        super().__init__()
+        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
+        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net.load_state_dict(checkpoint["actor"])
+        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
+            self.register_buffer(name, checkpoint[name].float())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+
+
+def load_expert(path: str, env_id: str) -> ExpertPolicy:
+    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    if not os.path.isfile(path):
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        policy = ExpertPolicy(checkpoint)
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+    if checkpoint["env_id"] != env_id:
+        raise UsageError(f"{path} is an expert for {checkpoint['env_id']}, not {env_id}: pass the checkpoint made for {env_id}")
+    return policy.eval()
+
+
+# ----------------------------------------------------------------------------------------------
+# Checkpoints
+
+
+def save_atomically(obj, path: str):
+    """torch.save to a temporary file, then rename: an interrupted run never leaves half a file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return=None):
+    to_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float64)
+    return {
+        "format": "copycat-suite/expert-ppo/1",
+        "env_id": args.env,
+        "obs_shape": list(env.single_observation_space.shape),
+        "action_shape": list(env.single_action_space.shape),
+        "hidden": args.hidden,
+        "actor": agent.actor_mean.state_dict(),
+        "obs_mean": to_tensor(obs_rms.mean),
+        "obs_var": to_tensor(obs_rms.var),
+        "action_low": to_tensor(env.single_action_space.low),
+        "action_high": to_tensor(env.single_action_space.high),
+        "args": asdict(args),
+        "global_step": global_step,
+        "eval_return": eval_return,
+        # only needed to resume training:
+        "agent": agent.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "obs_count": obs_rms.count,
+        "ret_mean": to_tensor(ret_rms.mean),
+        "ret_var": to_tensor(ret_rms.var),
+        "ret_count": ret_rms.count,
+        "best_return": best_return,
+    }
+
+
+# ----------------------------------------------------------------------------------------------
+# Evaluation
+
+
+def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int) -> list:
+    """Returns of `episodes` episodes of the deterministic policy, one env, seeds seed, seed+1, ..."""
+    env, returns = gym.make(env_id), []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, total = False, 0.0
+        while not done:
+            action = policy(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total, done = total + float(reward), terminated or truncated
+        returns.append(total)
+    env.close()
+    return returns
+
+
+def eval_only(args: Args):
+    path = args.checkpoint.format(env=args.env)
+    check_env(args.env).close()
+    if args.eval_episodes <= 0:
+        raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
+    policy = load_expert(path, args.env)
+    returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000)
+    for i, episode_return in enumerate(returns):
+        print(f"episode {i}: return {episode_return:.1f}")
+    print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
+
+
+# ----------------------------------------------------------------------------------------------
+# Training
+
+
+def validate(args: Args):
+    for name in ("total_timesteps", "num_envs", "num_steps", "num_minibatches", "update_epochs", "hidden", "save_every", "eval_every", "train_eval_episodes", "eval_episodes", "threads"):
+        if getattr(args, name) <= 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+    for name in ("learning_rate", "clip_coef", "max_grad_norm"):
+        if not getattr(args, name) > 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+    if not (0 < args.gamma <= 1 and 0 <= args.gae_lambda <= 1):
+        raise UsageError("--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
+    if (args.num_envs * args.num_steps) % args.num_minibatches:
+        raise UsageError("--num-minibatches must divide num-envs * num-steps")
+
+
+def train(args: Args):
+    validate(args)
+    check_env(args.env).close()
+    run_dir = args.run_dir.format(env=args.env, seed=args.seed)
+    latest_path, best_path = os.path.join(run_dir, "latest.pt"), os.path.join(run_dir, "best.pt")
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+
+    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the last
+    # observation in info["final_obs"]; so every stored transition belongs to one episode, and a
+    # truncated episode can be bootstrapped from V(final_obs).
+    envs = gym.vector.SyncVectorEnv(
+        [lambda: gym.make(args.env) for _ in range(args.num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
+    )
+    obs_dim, act_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
+    agent = Agent(obs_dim, act_dim, args.hidden)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+    obs_rms, ret_rms = RunningMeanStd((obs_dim,)), RunningMeanStd()
+    global_step, best_return = 0, -np.inf
+
+    if args.resume and os.path.isfile(latest_path):
+        try:
+            state = torch.load(latest_path, map_location="cpu", weights_only=True)
+            agent.load_state_dict(state["agent"])
+            optimizer.load_state_dict(state["optimizer"])
+        except Exception as error:
+            raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
+        if state["env_id"] != args.env:
+            raise UsageError(f"{latest_path} was trained on {state['env_id']}, not {args.env}: use another --run-dir")
+        obs_rms.mean, obs_rms.var, obs_rms.count = state["obs_mean"].numpy(), state["obs_var"].numpy(), state["obs_count"]
+        ret_rms.mean, ret_rms.var, ret_rms.count = state["ret_mean"].numpy(), state["ret_var"].numpy(), state["ret_count"]
+        global_step, best_return = state["global_step"], state["best_return"]
+        print(f"resumed from {latest_path} at step {global_step}")
+    elif args.resume:
+        print(f"no {latest_path} yet: starting fresh")
+
+    def checkpoint(eval_return=None):
+        return make_checkpoint(args, envs, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return)
+
+    def frozen_policy():
+        return ExpertPolicy(checkpoint())
+
+    batch_size = args.num_envs * args.num_steps
+    minibatch_size = batch_size // args.num_minibatches
+    obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim))
+    act_buf = torch.zeros((args.num_steps, args.num_envs, act_dim))
+    logp_buf, rew_buf, done_buf, val_buf = (torch.zeros((args.num_steps, args.num_envs)) for _ in range(4))
+
+    raw_obs, _ = envs.reset(seed=args.seed + global_step)  # a resumed run gets fresh episodes
+    discounted_return = np.zeros(args.num_envs)  # for reward scaling, as gymnasium's NormalizeReward
+    episode_return, episode_length, recent_returns = np.zeros(args.num_envs), np.zeros(args.num_envs, int), []
+    start_time, start_step = time.time(), global_step
+    next_save, next_eval = global_step + args.save_every, global_step + args.eval_every
+    stopped_early = False
+
+    while global_step < args.total_timesteps:
+        optimizer.param_groups[0]["lr"] = args.learning_rate * max(1.0 - global_step / args.total_timesteps, 0.0)
+
+        # ---- rollout
+        for step in range(args.num_steps):
+            obs_rms.update(raw_obs)
+            obs = torch.as_tensor(obs_rms.normalize(raw_obs), dtype=torch.float32)
+            with torch.no_grad():
+                action, logp, _, value = agent.action_and_value(obs)
+            raw_obs, reward, terminated, truncated, info = envs.step(action.numpy().clip(envs.single_action_space.low, envs.single_action_space.high))
+            global_step += args.num_envs
+            episode_return += reward
+            episode_length += 1
+
+            discounted_return = discounted_return * args.gamma + reward
+            ret_rms.update(discounted_return)
+            scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
+            done = terminated | truncated
+            if truncated.any():  # time limit, not death: bootstrap from the value of the last observation
+                final_obs = np.stack([info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)])
+                with torch.no_grad():
+                    final_value = agent.value(torch.as_tensor(obs_rms.normalize(final_obs), dtype=torch.float32)).numpy()
+                scaled_reward = scaled_reward + args.gamma * final_value * (truncated & ~terminated)
+            for i in np.flatnonzero(done):
+                recent_returns = (recent_returns + [episode_return[i]])[-20:]
+                episode_return[i], episode_length[i], discounted_return[i] = 0.0, 0, 0.0
+
+            obs_buf[step], act_buf[step], logp_buf[step], val_buf[step] = obs, action, logp, value
+            rew_buf[step] = torch.as_tensor(scaled_reward, dtype=torch.float32)
+            done_buf[step] = torch.as_tensor(done, dtype=torch.float32)
+
+        # ---- generalised advantage estimation; done[t] cuts the episode after step t
+        with torch.no_grad():
+            next_value = agent.value(torch.as_tensor(obs_rms.normalize(raw_obs), dtype=torch.float32))
+        advantages, last_gae = torch.zeros_like(rew_buf), 0.0
+        for t in reversed(range(args.num_steps)):
+            following_value = next_value if t == args.num_steps - 1 else val_buf[t + 1]
+            not_done = 1.0 - done_buf[t]
+            delta = rew_buf[t] + args.gamma * following_value * not_done - val_buf[t]
+            advantages[t] = last_gae = delta + args.gamma * args.gae_lambda * not_done * last_gae
+        returns = advantages + val_buf
+
+        # ---- PPO update
+        b_obs, b_act = obs_buf.reshape(-1, obs_dim), act_buf.reshape(-1, act_dim)
+        b_logp, b_adv, b_ret, b_val = logp_buf.reshape(-1), advantages.reshape(-1), returns.reshape(-1), val_buf.reshape(-1)
+        for _ in range(args.update_epochs):
+            for idx in torch.randperm(batch_size).split(minibatch_size):
+                _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
+                ratio = (new_logp - b_logp[idx]).exp()
+                adv = (b_adv[idx] - b_adv[idx].mean()) / (b_adv[idx].std() + 1e-8)
+                policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - args.clip_coef, 1 + args.clip_coef)).mean()
+                value_loss = 0.5 * ((new_value - b_ret[idx]) ** 2).mean()
+                loss = policy_loss - args.ent_coef * entropy.mean() + args.vf_coef * value_loss
+                optimizer.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+                optimizer.step()
+
+        # ---- progress, evaluation, checkpoints
+        elapsed = time.time() - start_time
+        sps = (global_step - start_step) / max(elapsed, 1e-6)
+        recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
+        eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
+        print(f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
+        if global_step >= next_eval:
+            next_eval += args.eval_every
+            eval_return = float(np.mean(evaluate(frozen_policy(), args.env, args.train_eval_episodes, seed=args.seed + global_step)))
+            print(f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True)
+            if eval_return > best_return:
+                best_return = eval_return
+                save_atomically(checkpoint(eval_return), best_path)
+        if global_step >= next_save:
+            next_save += args.save_every
+            save_atomically(checkpoint(), latest_path)
+        if args.max_minutes and elapsed > args.max_minutes * 60 and global_step < args.total_timesteps:
+            stopped_early = True
+            break
+
+    save_atomically(checkpoint(), latest_path)
+    envs.close()
+    if stopped_early:
+        print(f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume")
+        return
+    returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000)
+    save_atomically(checkpoint(float(np.mean(returns))), latest_path)
+    print(f"wrote {latest_path} (last) and {best_path} (best periodic evaluation, {best_return:.1f})")
+    print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
+
+
+if __name__ == "__main__":
+    args = tyro.cli(Args)
+    try:
+        eval_only(args) if args.eval_only else train(args)
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
