@@ -1,0 +1,151 @@
+"""Tests of scripts/check_copies.py, the "# Copied from" checker, on tiny files in a temp dir."""
+import textwrap
+
+import pytest
+
+from check_copies import apply_renames, check, parse_renames
+from conftest import run_script
+
+ORIGINAL = '''\
+import functools
+
+
+def helper(x):
+    """Doubles x."""
+    return 2 * x
+
+
+@functools.lru_cache
+class Foo:
+    size = 3
+
+    def grow(self):
+        return helper(self.size)
+'''
+
+
+def write(directory, name, text):
+    (directory / name).write_text(textwrap.dedent(text))
+
+
+def check_copies(root, *args):
+    return run_script("scripts/check_copies.py", "--root", root, *args)
+
+
+@pytest.fixture
+def root(tmp_path):
+    """A directory with orig.py, and copy.py holding exact copies of both its definitions."""
+    write(tmp_path, "orig.py", ORIGINAL)
+    write(tmp_path, "copy.py", '''\
+        import functools
+
+
+        # Copied from orig.helper
+        def helper(x):
+            """Doubles x."""
+            return 2 * x
+
+
+        # Copied from orig.Foo
+        @functools.lru_cache
+        class Foo:
+            size = 3
+
+            def grow(self):
+                return helper(self.size)
+        ''')
+    return tmp_path
+
+
+def test_matching_copies_pass(root):
+    result = check_copies(root)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "2 copies checked, all match"
+
+
+def test_drift_fails_naming_copy_and_original(root):
+    copy = root / "copy.py"
+    copy.write_text(copy.read_text().replace("size = 3", "size = 4"))
+    result = check_copies(root)
+    assert result.returncode == 1
+    assert result.stderr.strip() == "copy.py:10: copy of orig.Foo drifted from its original (orig.py:9)"
+
+
+def test_drift_in_a_decorator_is_found(root):
+    copy = root / "copy.py"
+    copy.write_text(copy.read_text().replace("@functools.lru_cache", "@functools.cache"))
+    assert check(root)[0] == ["copy.py:10: copy of orig.Foo drifted from its original (orig.py:9)"]
+
+
+def test_renames_apply_to_the_original(tmp_path):
+    write(tmp_path, "orig.py", ORIGINAL)
+    write(tmp_path, "renamed.py", '''\
+        # Copied from orig.helper with helper->triple, 2->3, Doubles->Triples
+        def triple(x):
+            """Triples x."""
+            return 3 * x
+        ''')
+    assert check_copies(tmp_path).returncode == 0
+    (tmp_path / "renamed.py").write_text((tmp_path / "renamed.py").read_text().replace("3 * x", "2 * x"))
+    result = check_copies(tmp_path)
+    assert result.returncode == 1
+    assert "renamed.py:1: copy of orig.helper drifted from its original (orig.py:4)" in result.stderr
+
+
+def test_parse_and_apply_renames():
+    renames = parse_renames("Foo->Bar, foo->bar")
+    assert renames == [("Foo", "Bar"), ("foo", "bar")]
+    assert apply_renames("Foo.foo(food)", renames) == "Bar.bar(bard)"
+    with pytest.raises(ValueError, match="bad rename"):
+        parse_renames("Foo=>Bar")
+
+
+@pytest.mark.parametrize(
+    "copy_text, message",
+    [
+        ("# Copied from orig.nothing\ndef nothing():\n    pass\n", "copy.py:1: original orig.nothing not found"),
+        ("# Copied from absent.helper\ndef helper(x):\n    pass\n", "copy.py:1: original absent.helper not found"),
+        ("# Copied from orig.helper\n\ndef helper(x):\n    pass\n", "copy.py:1: marker is not directly above a top-level def or class"),
+        ("# Copied from orig.helper\nx = 1\n", "copy.py:1: marker is not directly above a top-level def or class"),
+        ("# Copied from orig\ndef helper(x):\n    pass\n", "copy.py:1: malformed marker"),
+        ("# Copied from orig.helper with helper\ndef helper(x):\n    pass\n", "copy.py:1: bad rename 'helper'"),
+    ],
+)
+def test_bad_markers_fail(tmp_path, copy_text, message):
+    write(tmp_path, "orig.py", ORIGINAL)
+    write(tmp_path, "copy.py", copy_text)
+    result = check_copies(tmp_path)
+    assert result.returncode == 1
+    assert result.stderr.startswith(message), result.stderr
+    assert check_copies(tmp_path, "--fix").returncode == 1  # nothing --fix can repair
+
+
+def test_fix_restores_the_original_text(root):
+    copy = root / "copy.py"
+    good = copy.read_text()
+    drifted = good.replace('    """Doubles x."""\n', "").replace("size = 3", "size = 3\n    extra = 1")
+    copy.write_text(drifted)
+    assert check(root)[0] and len(check(root)[0]) == 2
+
+    result = check_copies(root, "--fix")
+    assert result.returncode == 0, result.stderr
+    assert copy.read_text() == good
+    assert (root / "orig.py").read_text() == ORIGINAL
+    assert result.stdout.splitlines()[-1] == "2 copies checked, all match"
+
+
+def test_copies_of_copies_compare_with_their_immediate_original(root):
+    write(root, "a_second.py", "# Copied from copy.helper with 2->4\ndef helper(x):\n    \"\"\"Doubles x.\"\"\"\n    return 4 * x\n")
+    assert check(root)[0] == []
+    copy = root / "copy.py"
+    copy.write_text(copy.read_text().replace("return 2 * x", "return 2 * x + 0"))
+    # a_second.py is checked first, against the drifted copy.py; --fix repairs both in order
+    assert [p.split(":")[0] for p in check(root)[0]] == ["a_second.py", "copy.py"]
+    assert check_copies(root, "--fix").returncode == 0
+    assert "return 4 * x\n" in (root / "a_second.py").read_text()
+
+
+def test_real_repo_copies_match():
+    result = run_script("scripts/check_copies.py")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().endswith("all match")
