@@ -77,6 +77,8 @@ class Args:
     """checkpoint evaluated by --eval-only"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
+    ship_to: Optional[str] = None
+    """with --eval-only: also write the checkpoint, with its evaluated return recorded, to this path"""
 
 
 class UsageError(Exception):
@@ -244,6 +246,11 @@ def eval_only(args: Args):
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
+    if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        checkpoint.update(eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns))
+        save_atomically(checkpoint, args.ship_to)
+        print(f"wrote {args.ship_to}")
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
 
 
