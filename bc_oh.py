@@ -72,16 +72,16 @@ class UsageError(Exception):
 def check_common_args(args):
     """Reject bad values of the arguments every method shares, before anything slow happens."""
     if args.obs_noise_std < 0:
-        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: pass 0 for noise-free observations")
     for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"):
         if getattr(args, name, 1) <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass an integer >= 1")
     if not args.seeds:
-        raise UsageError("--seeds needs at least one seed")
+        raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
     if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
-        raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}")
+        raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
     if args.learning_rate is not None and not args.learning_rate > 0:
-        raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}")
+        raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}: e.g. 1e-4, or leave it out for the paper's default")
 
 
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:

@@ -43,3 +43,35 @@ def assert_usage_error(result, expected):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}:\n{result.stderr}"
     assert expected in lines[0], f"{expected!r} not in stderr line {lines[0]!r}"
+
+
+SMOKE_ARGS = ("--epochs", 2, "--eval-every", 1, "--eval-episodes", 2, "--num-demo-samples", 300, "--seeds", 1)
+"""A tiny budget for a smoke run of an imitation method script (seconds); add --output-dir (and --demos)."""
+
+
+def link_experts(directory):
+    """Symlink REPO_ROOT/experts into `directory` (a smoke run's cwd, where demos/ is cached) and return it."""
+    directory = Path(directory)
+    (directory / "experts").symlink_to(REPO_ROOT / "experts", target_is_directory=True)
+    return directory
+
+
+def fake_demos(n=256, obs_dim=11, act_dim=3, episode_length=50, seed=0):
+    """Random demos shaped like Hopper-v4's (obs 11, action 3), episodes of `episode_length` steps:
+    a dict as load_or_generate_demos returns, for fast in-process training tests."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    return {"observations": rng.normal(size=(n, obs_dim)), "actions": rng.uniform(-1, 1, (n, act_dim)).astype(np.float32),
+            "episode_starts": np.arange(n) % episode_length == 0}
+
+
+def tiny_args(module, **overrides):
+    """module.Args on Hopper-v4 with a budget of a few milliseconds (lr set: run() normally fills it in)."""
+    settings = dict(env="Hopper-v4", seeds=[1], epochs=2, batch_size=32, hidden=32, eval_every=1, eval_episodes=1, learning_rate=1e-3)
+    return module.Args(**{**settings, **overrides})
+
+
+def skip_evaluation(monkeypatch, module, score=0.0):
+    """Replace module.evaluate by a constant, for training tests that need no env rollouts."""
+    monkeypatch.setattr(module, "evaluate", lambda policy, args, episodes, seed, device: [score] * episodes)

@@ -1,0 +1,166 @@
+"""The data pipeline every method shares (bc_oh.py holds the originals; check_copies keeps the copies equal):
+noise on the velocities, history stacking in training and evaluation, demo generation and caching,
+and the rejection of bad input by bc_so, bc_oh and c2f."""
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import bc_oh
+import bc_so
+import c2f
+from conftest import REPO_ROOT, fake_demos, tiny_args
+
+HOPPER_VELOCITIES = list(range(5, 11))
+POSITIONS = list(range(0, 5))
+
+
+# ----------------------------------------------------------------------------------------------
+# Noise
+
+
+def test_demo_noise_touches_only_the_velocity_entries():
+    observations = np.random.default_rng(0).normal(size=(100, 11))
+    noisy = bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=1)
+    assert np.array_equal(noisy[:, POSITIONS], observations[:, POSITIONS])
+    difference = noisy[:, HOPPER_VELOCITIES] - observations[:, HOPPER_VELOCITIES]
+    assert (difference != 0).all()
+    assert difference.std() == pytest.approx(0.2, rel=0.1)
+    assert np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=1), noisy), "not seeded"
+    assert not np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=2), noisy)
+    assert np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.0, seed=1), observations)
+    assert (observations != noisy).any(), "the input array must not be modified in place"
+
+
+def rollout(env, steps=20):
+    """Observations of a fixed action sequence from reset(seed=3)."""
+    observations = [env.reset(seed=3)[0]]
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, 3))
+    for action in actions:
+        observations.append(env.step(action)[0])
+    env.close()
+    return np.array(observations)
+
+
+def test_evaluation_noise_touches_only_the_velocity_entries_every_step():
+    clean = rollout(gym.make("Hopper-v4"))
+    noisy = rollout(bc_oh.VelocityNoise(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.5, seed=0))
+    assert np.array_equal(noisy[:, POSITIONS], clean[:, POSITIONS]), "noise must not change the dynamics or positions"
+    assert (noisy[:, HOPPER_VELOCITIES] != clean[:, HOPPER_VELOCITIES]).all(), "fresh noise on every velocity, every step"
+    assert np.array_equal(rollout(bc_oh.VelocityNoise(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.0, seed=0)), clean)
+
+
+def test_velocity_entries_of_v4_and_v5_envs():
+    assert bc_oh.velocity_dims(gym.make("Hopper-v4"), "Hopper-v4") == HOPPER_VELOCITIES
+    assert bc_oh.velocity_dims(gym.make("Hopper-v5"), "Hopper-v5") == HOPPER_VELOCITIES  # observation_structure
+    assert bc_oh.velocity_dims(gym.make("Ant-v4"), "Ant-v4") == list(range(13, 27))
+    pendulum = gym.make("Pendulum-v1")
+    with pytest.raises(bc_oh.UsageError, match="--velocity-dims"):
+        bc_oh.velocity_dims(pendulum, "Pendulum-v1")
+    assert bc_oh.velocity_dims(pendulum, "Pendulum-v1", [2]) == [2]
+    with pytest.raises(bc_oh.UsageError, match=r"must lie in \[0, 2\]"):
+        bc_oh.velocity_dims(pendulum, "Pendulum-v1", [3])
+
+
+# ----------------------------------------------------------------------------------------------
+# History
+
+
+def test_stack_history_repeats_the_first_frame_of_each_episode():
+    observations = np.arange(6, dtype=float)[:, None] * [1.0, 10.0]  # o_t = (t, 10 t)
+    starts = np.array([True, False, False, True, False, False])
+    rows = bc_oh.stack_history(observations, starts, 3)
+    frames = rows.reshape(6, 3, 2)[:, :, 0]  # the t of each frame, oldest first
+    assert frames.tolist() == [[0, 0, 0], [0, 0, 1], [0, 1, 2], [3, 3, 3], [3, 3, 4], [3, 4, 5]]
+    assert np.array_equal(rows[:, -2:], observations), "the last frame is o_t"
+    assert np.array_equal(bc_oh.stack_history(observations, starts, 1), observations)
+
+
+def test_history_stacker_agrees_with_stack_history():
+    """Two parallel envs with different episode boundaries, fed step by step as evaluate() does."""
+    rng = np.random.default_rng(0)
+    steps, history = 9, 3
+    observations = rng.normal(size=(2, steps, 4))
+    starts = np.zeros((2, steps), bool)
+    starts[:, 0] = True
+    starts[0, 4], starts[1, 2], starts[1, 3] = True, True, True  # env 1 has a one-step episode
+    stacker = bc_oh.HistoryStacker(history)
+    online = np.array([stacker.push(observations[:, t], starts[:, t]) for t in range(steps)])  # (steps, 2, H*4)
+    for env in range(2):
+        assert np.array_equal(online[:, env], bc_oh.stack_history(observations[env], starts[env], history))
+    assert np.array_equal(online[4, 0], np.tile(observations[0, 4], history)), "a new episode starts with its frame repeated"
+
+
+# ----------------------------------------------------------------------------------------------
+# Demonstrations
+
+
+def hopper_expert():
+    return bc_oh.load_expert(str(REPO_ROOT / "experts" / "Hopper-v4.pt"), "Hopper-v4")
+
+
+def test_demo_generation_is_deterministic():
+    first = bc_oh.generate_demos("Hopper-v4", hopper_expert(), 150)
+    second = bc_oh.generate_demos("Hopper-v4", hopper_expert(), 150)
+    for key in ("observations", "actions", "episode_starts"):
+        assert np.array_equal(first[key], second[key]), key
+    assert first["observations"].shape == (150, 11) and first["actions"].shape == (150, 3)
+    assert first["episode_starts"][0] and np.abs(first["actions"]).max() <= 1.0
+
+
+def test_demo_cache_round_trips(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = tiny_args(bc_oh, num_demo_samples=120, expert=str(REPO_ROOT / "experts" / "{env}.pt"))
+    env = gym.make("Hopper-v4")
+    demos = bc_oh.load_or_generate_demos(args, env)
+    cache = tmp_path / "demos" / "Hopper-v4_120.npz"
+    with np.load(cache) as saved:
+        for key in ("observations", "actions", "episode_starts"):
+            assert np.array_equal(saved[key], demos[key]), key
+        assert '"env_id": "Hopper-v4"' in str(saved["meta"])
+    assert list((tmp_path / "demos").iterdir()) == [cache], "no temporary file left behind"
+
+    def must_not_run(*_):
+        raise AssertionError("the cached demos were generated again")
+
+    monkeypatch.setattr(bc_oh, "generate_demos", must_not_run)
+    again = bc_oh.load_or_generate_demos(args, env)
+    assert all(np.array_equal(again[key], demos[key]) for key in demos)
+    args.demos = str(cache)  # the same file through --demos
+    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], demos["actions"])
+
+
+# ----------------------------------------------------------------------------------------------
+# Bad input (in-process; tests/test_core_scripts.py checks the one-line stderr and exit status)
+
+
+def write_demos(path, n=200, obs_dim=11, act_dim=3):
+    demos = fake_demos(n, obs_dim, act_dim)
+    np.savez(path, **demos)
+    return str(path)
+
+
+BAD_INPUTS = {
+    "unknown env": (dict(env="Nope-v0"), "cannot make env 'Nope-v0'"),
+    "history 0": (dict(history=0), "--history must be positive"),
+    "negative noise": (dict(obs_noise_std=-0.1), "--obs-noise-std must be >= 0"),
+    "no expert": (dict(), "train one with `python expert_ppo.py --env Hopper-v4"),
+    "missing demos": (dict(demos="missing.npz"), "demo file missing.npz not found"),
+    "corrupt demos": (dict(demos="corrupt.npz"), "corrupt.npz is not a readable demo file"),
+    "wrong observation size": (dict(demos="obs5.npz"), "but Hopper-v4 needs (N, 11) and (N, 3)"),
+    "wrong action size": (dict(demos="act2.npz"), "but Hopper-v4 needs (N, 11) and (N, 3)"),
+}
+
+
+@pytest.mark.parametrize("module", [bc_so, bc_oh, c2f], ids=lambda module: module.METHOD)
+@pytest.mark.parametrize("case", BAD_INPUTS)
+def test_bad_input_is_rejected_before_training(case, module, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no experts/ here
+    (tmp_path / "corrupt.npz").write_bytes(b"not a zip file")
+    write_demos(tmp_path / "obs5.npz", obs_dim=5)
+    write_demos(tmp_path / "act2.npz", act_dim=2)
+    monkeypatch.setattr(module, "train_seed", lambda *_: pytest.fail("training started on bad input"))
+    overrides, message = BAD_INPUTS[case]
+    with pytest.raises(module.UsageError) as error:
+        module.run(tiny_args(module, **overrides))
+    assert message in str(error.value)
+    assert ": " in str(error.value), "the message says what is wrong and how to fix it"
