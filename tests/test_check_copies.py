@@ -22,6 +22,8 @@ class Foo:
     def grow(self):
         return helper(self.size)
 '''
+# exact copies of both definitions, each under its marker
+COPY = ORIGINAL.replace("def helper", "# Copied from orig.helper\ndef helper").replace("@functools", "# Copied from orig.Foo\n@functools")
 
 
 def write(directory, name, text):
@@ -34,26 +36,9 @@ def check_copies(root, *args):
 
 @pytest.fixture
 def root(tmp_path):
-    """A directory with orig.py, and copy.py holding exact copies of both its definitions."""
+    """A directory with orig.py and copy.py (COPY)."""
     write(tmp_path, "orig.py", ORIGINAL)
-    write(tmp_path, "copy.py", '''\
-        import functools
-
-
-        # Copied from orig.helper
-        def helper(x):
-            """Doubles x."""
-            return 2 * x
-
-
-        # Copied from orig.Foo
-        @functools.lru_cache
-        class Foo:
-            size = 3
-
-            def grow(self):
-                return helper(self.size)
-        ''')
+    write(tmp_path, "copy.py", COPY)
     return tmp_path
 
 

@@ -10,7 +10,7 @@ import expert_ppo
 from conftest import REPO_ROOT, assert_usage_error, run_script
 
 TINY = ["--num-envs", 2, "--num-steps", 512, "--num-minibatches", 4, "--update-epochs", 1, "--eval-every", 2048,
-        "--save-every", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]  # fmt: skip
+        "--save-every", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]
 SUMMARY = re.compile(r"^Hopper-v4 expert: (-?\d+\.\d) ± (\d+\.\d) over (\d+) episodes$")
 SHIPPED_EXPERT = REPO_ROOT / "experts" / "Hopper-v4.pt"
 
@@ -145,6 +145,6 @@ def test_interrupted_save_keeps_the_old_checkpoint(interrupted_save):
 
 
 @pytest.mark.xfail(strict=True, reason="expert_ppo.save_atomically leaves its .tmp file when torch.save is interrupted; "
-                   "fix: delete it in an `except BaseException` around torch.save/os.replace, then drop this mark")  # fmt: skip
+                   "fix: delete it in an `except BaseException` around torch.save/os.replace, then drop this mark")
 def test_interrupted_save_leaves_no_tmp_file(interrupted_save):
     assert not list(interrupted_save.parent.glob("*.tmp*"))
