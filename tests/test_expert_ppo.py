@@ -57,11 +57,16 @@ def test_training_writes_a_complete_checkpoint(tiny_run, checkpoint):
     assert not list(run_dir.glob("*.tmp*")), "save_atomically left a temporary file"
 
 
-def test_eval_only_reproduces_the_final_evaluation(tiny_run, checkpoint):
+def test_eval_only_reproduces_the_final_evaluation_and_ships(tiny_run, checkpoint, tmp_path):
     # --eval-only and the final evaluation of training both use seeds 10000, 10001, ...
     train_mean, _ = summary(tiny_run[1])
-    result = run_script("expert_ppo.py", "--eval-only", "--checkpoint", checkpoint, "--eval-episodes", 1)
+    shipped = tmp_path / "shipped.pt"
+    result = run_script("expert_ppo.py", "--eval-only", "--checkpoint", checkpoint, "--eval-episodes", 1, "--ship-to", shipped)
     assert summary(result) == (train_mean, 1)
+    # --ship-to writes the same checkpoint with the evaluation recorded
+    original, copy = load(checkpoint), load(shipped)
+    assert copy["eval_return"] == pytest.approx(train_mean, abs=0.05) and copy["eval_episodes"] == 1
+    assert torch.equal(copy["obs_mean"], original["obs_mean"]) and copy["global_step"] == original["global_step"]
 
 
 def test_load_expert_round_trip(checkpoint):
