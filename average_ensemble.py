@@ -3,10 +3,10 @@
 history [o_{t-H+1}, ..., o_t]) on the demos and act with the average of their two actions.
 
 BC-SO cannot copy a_{t-1} from the history but misses the velocities the history reveals; BC-OH has
-them but copies. Averaging is the simplest mix of the two. Both members are trained exactly as
-bc_oh.py trains its policy (same loss, Adam, linear decay, and the same minibatches), and all three
-policies (the ensemble and each member) are evaluated at the same points on the same episodes, so
-the per-seed table and the JSON show what averaging buys over either member.
+them but copies. Averaging is the simplest mix of the two. Each member is trained side by side exactly
+as its own script (bc_so.py, bc_oh.py) trains its policy for the same seed: same initial weights, loss,
+Adam, learning-rate decay and minibatches. The ensemble and both members are evaluated at the same
+points on the same episodes, so the per-seed table and the JSON show what averaging buys over either.
 
     python average_ensemble.py --env Hopper-v4
 """
@@ -298,10 +298,11 @@ class Policy(nn.Module):
         return self.net(self.normalize(obs_history))
 
 
+# Copied from bc_so.Policy with Policy->CurrentFramePolicy
 class CurrentFramePolicy(nn.Module):
-    """BC-SO member: an MLP on the current frame o_t only, the last obs_dim entries of the history input."""
+    """BC-SO: only the current frame o_t, the last obs_dim entries of the stacked history, into one MLP."""
 
-    def __init__(self, obs_dim: int, act_dim: int, hidden: int, inputs: torch.Tensor):
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
         self.obs_dim = obs_dim
         self.normalize = Normalizer(inputs[:, -obs_dim:])
@@ -323,9 +324,12 @@ class AverageEnsemble(nn.Module):
 
 
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
-    bc_oh = Policy(obs_dim, act_dim, args.history, args.hidden, inputs)  # first: initialised as bc_oh.py's policy
-    bc_so = CurrentFramePolicy(obs_dim, act_dim, args.hidden, inputs)
-    return AverageEnsemble({"bc_so": bc_so, "bc_oh": bc_oh})
+    """The members bc_so.py and bc_oh.py train, each initialised from this seed as its own script does."""
+    seed, members = torch.initial_seed(), {}  # the seed train_seed gave torch.manual_seed
+    for name, member in (("bc_so", CurrentFramePolicy), ("bc_oh", Policy)):
+        torch.manual_seed(seed)
+        members[name] = member(obs_dim, act_dim, args.history, args.hidden, inputs)
+    return AverageEnsemble(members)
 
 
 # ----------------------------------------------------------------------------------------------
