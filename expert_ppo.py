@@ -171,11 +171,11 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
         raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy = ExpertPolicy(checkpoint)
+        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
         raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
-    if checkpoint["env_id"] != env_id:
-        raise UsageError(f"{path} is an expert for {checkpoint['env_id']}, not {env_id}: pass the checkpoint made for {env_id}")
+    if trained_on != env_id:
+        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
     return policy.eval()
 
 
@@ -187,8 +187,12 @@ def save_atomically(obj, path: str):
     """torch.save to a temporary file, then rename: an interrupted run never leaves half a file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    finally:  # after an interruption, remove the half-written temporary file (the old checkpoint is intact)
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return=None):
@@ -296,12 +300,16 @@ def train(args: Args):
     if args.resume and os.path.isfile(latest_path):
         try:
             state = torch.load(latest_path, map_location="cpu", weights_only=True)
+            trained_on = state["env_id"]
+        except Exception as error:
+            raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
+        if trained_on != args.env:
+            raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --run-dir")
+        try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
-        if state["env_id"] != args.env:
-            raise UsageError(f"{latest_path} was trained on {state['env_id']}, not {args.env}: use another --run-dir")
         obs_rms.mean, obs_rms.var, obs_rms.count = state["obs_mean"].numpy(), state["obs_var"].numpy(), state["obs_count"]
         ret_rms.mean, ret_rms.var, ret_rms.count = state["ret_mean"].numpy(), state["ret_var"].numpy(), state["ret_count"]
         global_step, best_return = state["global_step"], state["best_return"]

@@ -149,7 +149,5 @@ def test_interrupted_save_keeps_the_old_checkpoint(interrupted_save):
     assert load(interrupted_save) == {"global_step": 1}
 
 
-@pytest.mark.xfail(strict=True, reason="expert_ppo.save_atomically leaves its .tmp file when torch.save is interrupted; "
-                   "fix: delete it in an `except BaseException` around torch.save/os.replace, then drop this mark")
 def test_interrupted_save_leaves_no_tmp_file(interrupted_save):
     assert not list(interrupted_save.parent.glob("*.tmp*"))
