@@ -1,0 +1,123 @@
+"""dagger.py: the budget split and beta schedule, expert labels computed from the clean observation
+while the learner sees the noisy history, aggregation by exactly the stated number of labels, round 0
+being bc_oh.py's training, the rejection of a budget below one round, and a tiny run."""
+import json
+import re
+
+import numpy as np
+import pytest
+import torch
+
+import bc_oh
+import dagger
+from conftest import REPO_ROOT, SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_script, tiny_args
+
+EXPERT = str(REPO_ROOT / "experts" / "{env}.pt")
+HOPPER_VELOCITIES, HOPPER_POSITIONS, OBS_DIM = list(range(5, 11)), list(range(0, 5)), 11
+
+
+@pytest.fixture(scope="module")
+def expert():
+    return dagger.load_expert(EXPERT.format(env="Hopper-v4"), "Hopper-v4")
+
+
+def expert_on(expert, observations):
+    """The expert's action row by row, as collect_round queries it (a batched matmul may differ in the last bit)."""
+    return np.stack([expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy() for obs in observations])
+
+
+def collect(expert, beta, num_labels, history=2, seed=0):
+    args = tiny_args(dagger, history=history, expert=EXPERT)
+    torch.manual_seed(0)
+    learner = dagger.make_policy(args, OBS_DIM, 3, torch.randn(100, OBS_DIM * history))
+    return dagger.collect_round(learner, expert, args, num_labels, beta, np.random.default_rng(seed), torch.device("cpu"))
+
+
+def test_budget_split_and_beta_schedule():
+    assert dagger.split_budget(8000, 4) == [2000] * 4
+    assert dagger.split_budget(10, 3) == [4, 3, 3]
+    assert dagger.split_budget(3, 3) == [1, 1, 1]
+    assert [dagger.dagger_beta(r, 4) for r in range(1, 5)] == [0.75, 0.5, 0.25, 0.0]
+    assert dagger.dagger_beta(6, 4) == 0.0
+    assert dagger.dagger_beta(3, 15) == pytest.approx(0.8)  # imitation's default rampdown of 15 rounds
+
+
+def test_labels_are_the_experts_action_on_the_clean_observation(expert):
+    data = collect(expert, beta=0.5, num_labels=150, history=3)
+    clean, inputs, labels = data["clean_observations"], data["inputs"], data["labels"]
+    assert clean.shape == (150, OBS_DIM) and inputs.shape == (150, 3 * OBS_DIM) and labels.shape == (150, 3)
+    assert np.array_equal(labels, expert_on(expert, clean))
+    # the learner saw the noisy frame: the clean one plus noise on the velocities only
+    current = inputs[:, -OBS_DIM:]
+    assert np.array_equal(current[:, HOPPER_POSITIONS], clean[:, HOPPER_POSITIONS].astype(np.float32))
+    assert (current[:, HOPPER_VELOCITIES] != clean[:, HOPPER_VELOCITIES].astype(np.float32)).all()
+    assert np.std(current[:, HOPPER_VELOCITIES] - clean[:, HOPPER_VELOCITIES]) == pytest.approx(0.2, rel=0.2)
+    on_noisy = expert_on(expert, current)
+    assert (np.abs(on_noisy - labels).max(axis=1) > 1e-3).mean() > 0.9, "labels must not come from the noisy frame"
+    # ... inside a history that shifts by one frame per step within an episode
+    shifted = np.all(inputs[1:, :-OBS_DIM] == inputs[:-1, OBS_DIM:], axis=1)
+    assert shifted.mean() > 0.8
+    assert 0.3 < data["expert_acted"].mean() < 0.7
+
+
+def test_beta_decides_who_acts(expert):
+    all_expert, all_learner = collect(expert, beta=1.0, num_labels=20), collect(expert, beta=0.0, num_labels=20)
+    assert all_expert["expert_acted"].all() and not all_learner["expert_acted"].any()
+    # the same start (same rng), then different trajectories: the learner, not the expert, acted
+    assert np.array_equal(all_expert["clean_observations"][0], all_learner["clean_observations"][0])
+    assert not np.allclose(all_expert["clean_observations"][5], all_learner["clean_observations"][5])
+
+
+def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, expert):
+    """train_seed with 50 labels over 3 rounds; evaluation replaced by a fingerprint of the weights, so
+    the round-0 evaluations show that DAgger starts from exactly the policy bc_oh.py trains."""
+    fingerprint = lambda policy, args, episodes, seed, device: [sum(p.double().sum().item() for p in policy.parameters())] * episodes
+    monkeypatch.setattr(dagger, "evaluate", fingerprint)
+    monkeypatch.setattr(bc_oh, "evaluate", fingerprint)
+    demos = fake_demos(n=256)
+    args = tiny_args(dagger, expert=EXPERT, dagger_samples=50, dagger_rounds=3, dagger_epochs=1)
+    result = dagger.train_seed(args, demos, 1, torch.device("cpu"))
+    assert [r["labels"] for r in result["rounds"]] == [17, 17, 16]
+    assert [r["aggregate"] for r in result["rounds"]] == [256 + 17, 256 + 34, 256 + 50]
+    assert [r["beta"] for r in result["rounds"]] == pytest.approx([2 / 3, 1 / 3, 0.0])
+    data = result["dagger_data"]
+    assert len(data["labels"]) == len(data["inputs"]) == len(data["clean_observations"]) == 50
+    assert np.array_equal(data["labels"], expert_on(expert, data["clean_observations"]))
+    # evaluations: round 0 at epochs 1, 2 (as bc_oh.py), one per round after, three of the final learner
+    assert [epoch for epoch, _ in result["evaluations"]] == [1, 2, 3, 4, 5, 5, 5]
+    alone = bc_oh.train_seed(tiny_args(bc_oh), demos, 1, torch.device("cpu"))
+    assert result["evaluations"][:2] == alone["evaluations"]
+    assert result["bc_oh_score"] == np.mean([ret for _, ret in alone["evaluations"]])
+    assert result["evaluations"][2][1] != alone["evaluations"][-1][1], "the learner trains on after round 0"
+
+
+def test_bad_dagger_settings_are_rejected(tmp_path):
+    assert_usage_error(run_script("dagger.py", "--dagger-samples", 3, "--dagger-rounds", 4, cwd=tmp_path),
+                       "--dagger-samples 3 is below one label per round of --dagger-rounds 4")
+    for overrides, message in ((dict(dagger_epochs=0), "--dagger-epochs must be positive"),
+                               (dict(dagger_rounds=0), "--dagger-rounds must be positive"),
+                               (dict(dagger_beta_rounds=-1), "--dagger-beta-rounds must be positive"),
+                               (dict(dagger_samples=0, dagger_rounds=1), "--dagger-samples 0 is below one label"),
+                               (dict(expert=str(tmp_path / "none.pt")), "no expert for Hopper-v4")):
+        with pytest.raises(dagger.UsageError, match=re.escape(message)):
+            dagger.check_dagger_args(tiny_args(dagger, **{"expert": EXPERT, **overrides}))
+    with pytest.raises(dagger.UsageError, match="not Hopper-v4"):
+        dagger.check_dagger_args(tiny_args(dagger, expert=EXPERT.format(env="Ant-v4")))
+    dagger.check_dagger_args(tiny_args(dagger, expert=EXPERT, dagger_samples=4, dagger_rounds=4))  # one label a round is enough
+
+
+def test_tiny_run_prints_the_summary_and_writes_the_json(tmp_path):
+    link_experts(tmp_path)
+    result = run_script("dagger.py", *SMOKE_ARGS, "--dagger-samples", 60, "--dagger-rounds", 2, "--dagger-epochs", 1,
+                        "--output-dir", "out", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = re.fullmatch(r"Hopper-v4 dagger: (-?[\d.]+) ± ([\d.]+) over 1 seeds", result.stdout.strip().splitlines()[-1])
+    assert summary, result.stdout
+    data = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
+    seed = data["scores"]["1"]
+    assert data["method"] == "dagger" and data["args"]["dagger_samples"] == 60
+    assert [(r["labels"], r["aggregate"], r["beta"]) for r in seed["rounds"]] == [(30, 330, 0.5), (30, 360, 0.0)]
+    assert [epoch for epoch, _ in seed["evaluations"]] == [1, 2, 3, 4, 4, 4]
+    assert seed["score"] == pytest.approx(np.mean([ret for _, ret in seed["evaluations"][-3:]]))
+    assert round(seed["score"], 1) == float(summary.group(1))
+    assert re.search(rf"^\s+1 \|\s+{seed['score']:.1f} \|\s+{seed['bc_oh_score']:.1f}$", result.stdout, re.M)
