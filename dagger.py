@@ -387,15 +387,14 @@ def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, b
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         expert_acts = rng.random() < beta
         action = label if expert_acts else policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy().clip(low, high)
-        for key, value in zip(record, (history[0], clean, label, expert_acts)):
+        for key, value in zip(record, (history[0].astype(np.float32), clean, label, expert_acts)):
             record[key].append(value)
         clean, _, terminated, truncated, _ = env.step(action)
         new_episode = terminated or truncated
         if new_episode:
             clean, _ = env.reset()
     env.close()
-    return {"inputs": np.array(record["inputs"], np.float32), "clean_observations": np.array(record["clean_observations"], np.float64),
-            "labels": np.array(record["labels"], np.float32), "expert_acted": np.array(record["expert_acted"], bool)}
+    return {key: np.array(values) for key, values in record.items()}
 
 
 # ----------------------------------------------------------------------------------------------
