@@ -1,14 +1,12 @@
 """The data pipeline every method shares (bc_oh.py holds the originals; check_copies keeps the copies equal):
-noise on the velocities, history stacking in training and evaluation, demo generation and caching,
-and the rejection of bad input by bc_so, bc_oh and c2f."""
+noise on the velocities, history stacking in training and evaluation, demo generation and caching.
+Bad input is tested through the command line in test_core_scripts.py."""
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import bc_oh
-import bc_so
-import c2f
-from conftest import REPO_ROOT, fake_demos, tiny_args
+from conftest import REPO_ROOT, tiny_args
 
 HOPPER_VELOCITIES = list(range(5, 11))
 POSITIONS = list(range(0, 5))
@@ -127,40 +125,3 @@ def test_demo_cache_round_trips(tmp_path, monkeypatch):
     assert all(np.array_equal(again[key], demos[key]) for key in demos)
     args.demos = str(cache)  # the same file through --demos
     assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], demos["actions"])
-
-
-# ----------------------------------------------------------------------------------------------
-# Bad input (in-process; tests/test_core_scripts.py checks the one-line stderr and exit status)
-
-
-def write_demos(path, n=200, obs_dim=11, act_dim=3):
-    demos = fake_demos(n, obs_dim, act_dim)
-    np.savez(path, **demos)
-    return str(path)
-
-
-BAD_INPUTS = {
-    "unknown env": (dict(env="Nope-v0"), "cannot make env 'Nope-v0'"),
-    "history 0": (dict(history=0), "--history must be positive"),
-    "negative noise": (dict(obs_noise_std=-0.1), "--obs-noise-std must be >= 0"),
-    "no expert": (dict(), "train one with `python expert_ppo.py --env Hopper-v4"),
-    "missing demos": (dict(demos="missing.npz"), "demo file missing.npz not found"),
-    "corrupt demos": (dict(demos="corrupt.npz"), "corrupt.npz is not a readable demo file"),
-    "wrong observation size": (dict(demos="obs5.npz"), "but Hopper-v4 needs (N, 11) and (N, 3)"),
-    "wrong action size": (dict(demos="act2.npz"), "but Hopper-v4 needs (N, 11) and (N, 3)"),
-}
-
-
-@pytest.mark.parametrize("module", [bc_so, bc_oh, c2f], ids=lambda module: module.METHOD)
-@pytest.mark.parametrize("case", BAD_INPUTS)
-def test_bad_input_is_rejected_before_training(case, module, tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)  # no experts/ here
-    (tmp_path / "corrupt.npz").write_bytes(b"not a zip file")
-    write_demos(tmp_path / "obs5.npz", obs_dim=5)
-    write_demos(tmp_path / "act2.npz", act_dim=2)
-    monkeypatch.setattr(module, "train_seed", lambda *_: pytest.fail("training started on bad input"))
-    overrides, message = BAD_INPUTS[case]
-    with pytest.raises(module.UsageError) as error:
-        module.run(tiny_args(module, **overrides))
-    assert message in str(error.value)
-    assert ": " in str(error.value), "the message says what is wrong and how to fix it"

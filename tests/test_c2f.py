@@ -1,0 +1,229 @@
+"""c2f.py: the coarse-to-fine model, its stop-gradient, two-stage training and every Table 3 ablation flag;
+bc_so.py's policy (o_t only); the same seed twice gives the same training on CPU."""
+import copy
+
+import pytest
+import torch
+
+import bc_oh
+import bc_so
+import c2f
+from conftest import fake_demos, skip_evaluation, tiny_args
+
+OBS, ACT, H, HIDDEN = 11, 3, 3, 16
+DEFAULTS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True)
+
+
+def model(seed=0, **flags):
+    torch.manual_seed(seed)
+    inputs = torch.randn(64, H * OBS) * 3 + 1
+    return c2f.Policy(OBS, ACT, H, HIDDEN, inputs, **{**DEFAULTS, **flags})
+
+
+def batch(seed=1):
+    return torch.randn(8, H * OBS, generator=torch.Generator().manual_seed(seed)), torch.rand(8, ACT)
+
+
+def shapes(policy):
+    return {name: tuple(p.shape) for name, p in policy.named_parameters()}
+
+
+def capture_inputs(policy, layers, obs_history):
+    """Run the model; return (zeta, feature, final, {layer name: its input})."""
+    seen, hooks = {}, []
+    for name in layers:
+        hooks.append(policy.get_submodule(name).register_forward_hook(lambda m, args, out, name=name: seen.__setitem__(name, args[0])))
+    zeta, feature = policy.coarse_model(obs_history)
+    final = policy(obs_history)
+    for hook in hooks:
+        hook.remove()
+    return zeta, feature, final, seen
+
+
+FUSION_LAYERS = {"early": "policy_first.0", "middle": "policy_rest.0", "late": "head"}
+WIDTH_WITHOUT_ZETA = {"early": H * OBS, "middle": HIDDEN, "late": HIDDEN}
+
+
+@pytest.mark.parametrize("fusion", ["late", "middle", "early"])
+def test_each_fusion_feeds_zeta_where_it_says(fusion):
+    policy = model(fusion=fusion)
+    obs_history, _ = batch()
+    zeta, _, final, seen = capture_inputs(policy, FUSION_LAYERS.values(), obs_history)
+    for stage, layer in FUSION_LAYERS.items():
+        extra = ACT if stage == fusion else 0
+        assert policy.get_submodule(layer).in_features == WIDTH_WITHOUT_ZETA[stage] + extra, layer
+        assert seen[layer].shape[1] == WIDTH_WITHOUT_ZETA[stage] + extra
+    assert torch.equal(seen[FUSION_LAYERS[fusion]][:, -ACT:], zeta), "zeta is concatenated at the end of that layer's input"
+    if fusion == "early":
+        assert torch.equal(seen["policy_first.0"][:, :-ACT], policy.normalize(obs_history)), "beside the normalised history"
+    # perturbing zeta (through the coarse model's output layer) changes the final action
+    with torch.no_grad():
+        policy.coarse[-1].bias += 1.0
+    assert not torch.allclose(policy(obs_history), final)
+
+
+def test_coarse_output_feature_feeds_the_coarse_models_last_hidden_feature():
+    policy = model(coarse_output="feature")
+    obs_history, target = batch()
+    _, feature, _, seen = capture_inputs(policy, ["head"], obs_history)
+    assert policy.head.in_features == 2 * HIDDEN and feature.shape == (8, HIDDEN)
+    assert torch.equal(seen["head"][:, -HIDDEN:], feature)
+    assert torch.equal(feature, policy.coarse[:-1](policy.normalize(obs_history)[:, -OBS:])), "after the second ReLU"
+    zeta, final = policy.coarse_and_final(obs_history)
+    ((zeta - target) ** 2).mean().backward()
+    assert policy.coarse[-1].weight.grad.abs().sum() > 0, "the action head still learns from the coarse loss"
+    policy.zero_grad()
+    ((final - target) ** 2).mean().backward()
+    assert all(p.grad is None or not p.grad.any() for p in policy.coarse.parameters()), "stop-gradient on the feature too"
+
+
+def older_frames_changed(obs_history):
+    changed = obs_history.clone()
+    changed[:, :-OBS] += 5.0
+    return changed
+
+
+@pytest.mark.parametrize("which", ["current", "history"])
+def test_coarse_input(which):
+    policy = model(coarse_input=which)
+    assert policy.coarse[0].in_features == (H * OBS if which == "history" else OBS)
+    obs_history, _ = batch()
+    zeta_changed = not torch.allclose(policy.coarse_model(obs_history)[0], policy.coarse_model(older_frames_changed(obs_history))[0])
+    assert zeta_changed == (which == "history"), "only a history coarse model sees the older frames"
+
+
+@pytest.mark.parametrize("which", ["history", "current"])
+def test_policy_input(which):
+    policy = model(policy_input=which)
+    assert policy.policy_first[0].in_features == (H * OBS if which == "history" else OBS)
+    obs_history, _ = batch()
+    final_changed = not torch.allclose(policy(obs_history), policy(older_frames_changed(obs_history)))
+    assert final_changed == (which == "history"), "with o_t as both inputs the older frames are ignored"
+
+
+@pytest.mark.parametrize("flags, changed", [
+    (dict(fusion="middle"), {"policy_rest.0.weight", "head.weight"}),
+    (dict(fusion="early"), {"policy_first.0.weight", "head.weight"}),
+    (dict(coarse_output="feature"), {"head.weight"}),
+    (dict(coarse_input="history"), {"coarse.0.weight"}),
+    (dict(policy_input="current"), {"policy_first.0.weight"}),
+    (dict(stop_gradient=False), set()),
+])  # fmt: skip
+def test_each_ablation_changes_only_the_layers_it_names(flags, changed):
+    default, ablated = shapes(model()), shapes(model(**flags))
+    assert default.keys() == ablated.keys()
+    assert {name for name in default if default[name] != ablated[name]} == changed
+
+
+def test_paper_model_dimensions():
+    policy = model()
+    assert [layer.in_features for layer in policy.coarse if isinstance(layer, torch.nn.Linear)] == [OBS, HIDDEN, HIDDEN]
+    assert policy.coarse[-1].out_features == ACT, "zeta is an action"
+    assert [policy.policy_first[0].in_features, policy.policy_rest[0].in_features, policy.policy_rest[2].out_features] == [H * OBS, HIDDEN, HIDDEN]
+    assert (policy.head.in_features, policy.head.out_features) == (HIDDEN + ACT, ACT)
+
+
+@pytest.mark.parametrize("stop_gradient", [True, False])
+def test_stop_gradient_keeps_the_final_loss_off_the_coarse_model(stop_gradient):
+    policy = model(stop_gradient=stop_gradient)
+    obs_history, target = batch()
+    _, final = policy.coarse_and_final(obs_history)
+    ((final - target) ** 2).mean().backward()
+    coarse_grad = sum(p.grad.abs().sum() for p in policy.coarse.parameters() if p.grad is not None)
+    assert (coarse_grad > 0) == (not stop_gradient)
+    assert policy.policy_first[0].weight.grad.abs().sum() > 0 and policy.head.weight.grad.abs().sum() > 0
+    # the stop-gradient changes only the backward pass: same outputs, same gradients on the policy model
+    other = model(stop_gradient=not stop_gradient)
+    _, other_final = other.coarse_and_final(obs_history)
+    assert torch.equal(other_final, final)
+    ((other_final - target) ** 2).mean().backward()
+    assert torch.allclose(other.head.weight.grad, policy.head.weight.grad)
+
+
+def train(module, monkeypatch, capsys, seed=1, demos=None, **overrides):
+    """train_seed on fake demos without env rollouts; returns (state_dict, printed loss lines)."""
+    skip_evaluation(monkeypatch, module)
+    demos = fake_demos() if demos is None else demos
+    result = module.train_seed(tiny_args(module, hidden=HIDDEN, **overrides), demos, seed, torch.device("cpu"))
+    lines = [line for line in capsys.readouterr().out.splitlines() if "loss" in line]
+    return {k: v.clone() for k, v in result["policy"].state_dict().items()}, lines
+
+
+def test_two_stage_trains_the_coarse_model_first_then_leaves_it_unchanged(monkeypatch, capsys):
+    snapshots = {}
+    stage_one = c2f.train_coarse
+
+    def recording_train_coarse(policy, *rest):
+        snapshots["initial"] = copy.deepcopy(policy.state_dict())
+        stage_one(policy, *rest)
+        snapshots["after stage 1"] = copy.deepcopy(policy.state_dict())
+
+    monkeypatch.setattr(c2f, "train_coarse", recording_train_coarse)
+    final, lines = train(c2f, monkeypatch, capsys, two_stage=True, stop_gradient=False)  # no sg: only freezing protects it
+    initial, after_one = snapshots["initial"], snapshots["after stage 1"]
+    coarse = [name for name in final if name.startswith("coarse.")]
+    rest = [name for name in final if not name.startswith(("coarse.", "normalize."))]
+    assert all(not torch.equal(initial[name], after_one[name]) for name in coarse), "stage 1 trains the coarse model"
+    assert all(torch.equal(initial[name], after_one[name]) for name in rest), "stage 1 trains nothing else"
+    assert all(torch.equal(after_one[name], final[name]) for name in coarse), "stage 2 must not change the coarse model"
+    assert all(not torch.equal(after_one[name], final[name]) for name in rest), "stage 2 trains the rest"
+    assert sum("stage 1" in line for line in lines) >= 1 and sum("stage 1" not in line for line in lines) == 2
+
+
+def test_two_stage_coarse_model_is_bc_so(monkeypatch, capsys):
+    """Stage 1 trains exactly a BC-SO policy: same init, data, batches and lr schedule give the same weights."""
+    snapshot = {}
+    stage_one = c2f.train_coarse
+    monkeypatch.setattr(c2f, "train_coarse", lambda policy, *rest: (stage_one(policy, *rest), snapshot.update(copy.deepcopy(policy.coarse.state_dict()))))
+    train(c2f, monkeypatch, capsys, two_stage=True)
+    bc_so_weights, _ = train(bc_so, monkeypatch, capsys)
+    for name, value in snapshot.items():
+        assert torch.allclose(bc_so_weights[f"net.{name}"], value, atol=1e-6), name
+
+
+def test_joint_training_minimises_both_losses(monkeypatch, capsys):
+    """The printed loss is MSE(zeta) + MSE(final) of the last batch (Eq. 2); constant actions make the targets known."""
+    outputs = []
+    original = c2f.Policy.coarse_and_final
+    monkeypatch.setattr(c2f.Policy, "coarse_and_final", lambda self, obs_history: outputs.append(original(self, obs_history)) or outputs[-1])
+    demos = fake_demos()
+    demos["actions"][:] = [0.5, -0.25, 0.1]
+    _, lines = train(c2f, monkeypatch, capsys, demos=demos, epochs=1)
+    zeta, final = outputs[-1]
+    target = torch.tensor([0.5, -0.25, 0.1])
+    expected = ((zeta - target) ** 2).mean() + ((final - target) ** 2).mean()
+    assert f"loss {expected.item():.5f} " in lines[-1]
+
+
+@pytest.mark.parametrize("module", [bc_so, bc_oh, c2f], ids=lambda module: module.METHOD)
+def test_same_seed_gives_the_same_training(module, monkeypatch, capsys):
+    first, first_lines = train(module, monkeypatch, capsys)
+    second, second_lines = train(module, monkeypatch, capsys)
+    other, other_lines = train(module, monkeypatch, capsys, seed=2)
+    assert first_lines == second_lines and len(first_lines) == 2
+    assert all(torch.equal(first[name], second[name]) for name in first)
+    assert first_lines != other_lines
+
+
+# ----------------------------------------------------------------------------------------------
+# bc_so.py
+
+
+def test_bc_so_reads_only_the_current_frame():
+    torch.manual_seed(0)
+    inputs = torch.randn(64, H * OBS) * 3 + 1
+    policy = bc_so.Policy(OBS, ACT, H, HIDDEN, inputs)
+    assert policy.net[0].in_features == OBS
+    assert torch.equal(policy.normalize.mean, inputs[:, -OBS:].mean(0)), "normalised with statistics of o_t"
+    obs_history, _ = batch()
+    assert torch.equal(policy(obs_history), policy(older_frames_changed(obs_history)))
+    changed = obs_history.clone()
+    changed[:, -1] += 5.0
+    assert not torch.equal(policy(obs_history), policy(changed))
+
+
+def test_bc_so_result_does_not_depend_on_history(monkeypatch, capsys):
+    one, one_lines = train(bc_so, monkeypatch, capsys, history=1)
+    three, three_lines = train(bc_so, monkeypatch, capsys, history=3)
+    assert one_lines == three_lines
+    assert all(torch.equal(one[name], three[name]) for name in one)

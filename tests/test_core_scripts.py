@@ -1,0 +1,110 @@
+"""bc_so.py, bc_oh.py and c2f.py as commands: a tiny-budget run of each prints the per-seed table and the
+summary line and writes the JSON result (and with --save-model a checkpoint that rebuilds the model);
+every bad input gives one line on stderr, exit status 2 and no traceback."""
+import json
+import re
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+import bc_so
+import c2f
+from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
+
+SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds$")
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """A cwd with experts/, where the first run caches the tiny Hopper demos (300 steps) for the next."""
+    return link_experts(tmp_path_factory.mktemp("core_scripts"))
+
+
+def smoke(script, workdir, *extra):
+    result = run_script(script, *SMOKE_ARGS, "--output-dir", "out/{method}", *extra, cwd=workdir)
+    assert result.returncode == 0, result.stderr
+    return result
+
+
+def check_result(result, workdir, method, seeds):
+    """The table, the summary line and the JSON result agree, with the paper's scoring."""
+    lines = result.stdout.splitlines()
+    match = SUMMARY.match(lines[-1])
+    assert match and match.group(1) == method, lines[-1]
+    assert int(match.group(4)) == len(seeds)
+    path = workdir / "out" / method / f"result_seeds{'-'.join(map(str, seeds))}.json"
+    assert f"result: out/{method}/{path.name}" in lines
+    summary = json.loads(path.read_text())
+    assert set(summary) == {"env", "method", "args", "scores", "mean", "std"}
+    assert (summary["env"], summary["method"]) == ("Hopper-v4", method)
+    assert summary["args"]["epochs"] == 2 and summary["args"]["learning_rate"] == 1e-5, "the paper's Hopper lr is filled in"
+    scores = []
+    for seed in seeds:
+        entry = summary["scores"][str(seed)]
+        epochs, returns = zip(*entry["evaluations"])
+        assert epochs == (1, 2) and all(ret > 0 for ret in returns)
+        assert entry["score"] == pytest.approx(np.mean(returns[-3:]))
+        assert re.search(rf"^\s+{seed} \|\s+{entry['score']:.1f}$", result.stdout, re.M), "the per-seed row"
+        scores.append(entry["score"])
+    assert summary["mean"] == pytest.approx(np.mean(scores)) and summary["std"] == pytest.approx(np.std(scores))
+    assert (match.group(2), match.group(3)) == (f"{summary['mean']:.1f}", f"{summary['std']:.1f}")
+    return summary
+
+
+def test_bc_oh_smoke_run_generates_demos_and_reports(tmp_path):
+    workdir = link_experts(tmp_path)
+    result = smoke("bc_oh.py", workdir)
+    assert "generating 300 demonstration steps with experts/Hopper-v4.pt" in result.stdout
+    assert (workdir / "demos" / "Hopper-v4_300.npz").is_file()
+    assert re.search(r"seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| ETA", result.stdout)
+    check_result(result, workdir, "bc_oh", [1])
+
+
+def test_bc_so_smoke_run_with_two_seeds(workdir):
+    result = smoke("bc_so.py", workdir, "--seeds", 1, 2)
+    summary = check_result(result, workdir, "bc_so", [1, 2])
+    assert summary["scores"]["1"]["score"] != summary["scores"]["2"]["score"]
+
+
+def test_c2f_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
+    result = smoke("c2f.py", workdir, "--two-stage", "--fusion", "middle", "--coarse-output", "feature", "--save-model")
+    assert "stage 1 (coarse model) | epoch 2/2" in result.stdout
+    summary = check_result(result, workdir, "c2f", [1])
+    assert (summary["args"]["fusion"], summary["args"]["coarse_output"], summary["args"]["two_stage"]) == ("middle", "feature", True)
+    checkpoint = torch.load(workdir / "out" / "c2f" / "seed1.pt", weights_only=False)
+    assert (checkpoint["method"], checkpoint["env_id"], checkpoint["obs_dim"], checkpoint["act_dim"]) == ("c2f", "Hopper-v4", 11, 3)
+    args = SimpleNamespace(**checkpoint["args"])
+    policy = c2f.make_policy(args, 11, 3, torch.zeros(2, 11 * args.history))
+    policy.load_state_dict(checkpoint["state_dict"])  # strict: the args rebuild exactly the saved model
+    with np.load(workdir / "demos" / "Hopper-v4_300.npz") as demos:  # the normalisation came with the weights
+        noisy = c2f.add_obs_noise(demos["observations"], list(range(5, 11)), 0.2, seed=1)
+        inputs = c2f.stack_history(noisy, demos["episode_starts"], args.history)
+    assert torch.allclose(policy.normalize.mean, torch.as_tensor(inputs.mean(0), dtype=torch.float32), atol=1e-5)
+    assert policy(torch.as_tensor(inputs[:5], dtype=torch.float32)).shape == (5, 3)
+
+
+BAD_INPUTS = {
+    "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
+    "history 0": (["--history", 0], "--history must be positive, got 0: "),
+    "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1: "),
+    "no expert": ([], "no expert for Hopper-v4 at experts/Hopper-v4.pt: train one with `python expert_ppo.py --env Hopper-v4"),
+    "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found: "),
+    "corrupt demos": (["--demos", "corrupt.npz"], "corrupt.npz is not a readable demo file ("),
+    "wrong observation size": (["--demos", "obs5.npz"], "obs5.npz holds observations (200, 5) and actions (200, 3), but Hopper-v4 needs (N, 11) and (N, 3): "),
+    "wrong action size": (["--demos", "act2.npz"], "act2.npz holds observations (200, 11) and actions (200, 2), but Hopper-v4 needs (N, 11) and (N, 3): "),
+}
+
+
+@pytest.mark.parametrize("script", ["bc_so.py", "bc_oh.py", "c2f.py"])
+@pytest.mark.parametrize("case", BAD_INPUTS)
+def test_bad_input_gives_one_line_and_exit_2(case, script, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no experts/ here
+    np.savez(tmp_path / "obs5.npz", **fake_demos(200, obs_dim=5))
+    (tmp_path / "corrupt.npz").write_bytes((tmp_path / "obs5.npz").read_bytes()[:3000])  # a cut-off download
+    np.savez(tmp_path / "act2.npz", **fake_demos(200, act_dim=2))
+    args, message = BAD_INPUTS[case]
+    result = run_in_process(script, *args, "--epochs", 1, "--eval-episodes", 1, "--seeds", 1)  # short, should it train
+    assert_usage_error(result, message)
+    assert result.returncode == 2 and result.stdout == "", "rejected before anything else happens"
