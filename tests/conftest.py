@@ -75,3 +75,24 @@ def tiny_args(module, **overrides):
 def skip_evaluation(monkeypatch, module, score=0.0):
     """Replace module.evaluate by a constant, for training tests that need no env rollouts."""
     monkeypatch.setattr(module, "evaluate", lambda policy, args, episodes, seed, device: [score] * episodes)
+
+
+def run_in_process(script, *args):
+    """Run REPO_ROOT/script as __main__ inside this process with sys.argv = [script, *args] (no new
+    interpreter: ~0.1 s instead of ~2 s, for fast bad-input checks). Returns an object with returncode,
+    stdout and stderr like run_script's, so assert_usage_error applies."""
+    import contextlib
+    import io
+    import runpy
+    from types import SimpleNamespace
+
+    stdout, stderr, argv, code = io.StringIO(), io.StringIO(), sys.argv, 0
+    sys.argv = [str(REPO_ROOT / script), *map(str, args)]
+    try:
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            runpy.run_path(str(REPO_ROOT / script), run_name="__main__")
+    except SystemExit as exit:
+        code = exit.code if isinstance(exit.code, int) else 1
+    finally:
+        sys.argv = argv
+    return SimpleNamespace(returncode=code, stdout=stdout.getvalue(), stderr=stderr.getvalue())
