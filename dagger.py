@@ -366,9 +366,9 @@ def split_budget(total: int, rounds: int) -> list:
     return [total // rounds + (r < total % rounds) for r in range(rounds)]
 
 
-def dagger_beta(round: int, beta_rounds: int) -> float:
+def dagger_beta(round_number: int, beta_rounds: int) -> float:
     """Probability of executing the expert's action in round (1-based): linear from 1 (the demos, round 0) to 0."""
-    return max(0.0, 1.0 - round / beta_rounds)
+    return max(0.0, 1.0 - round_number / beta_rounds)
 
 
 @torch.no_grad()
@@ -417,17 +417,17 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     epoch, total_epochs, evaluations, start = 0, args.epochs + args.dagger_rounds * args.dagger_epochs, [], time.time()
     generator = torch.Generator(device=device).manual_seed(seed)
 
-    for round, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
-        if round > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
-            beta = dagger_beta(round, args.dagger_beta_rounds or args.dagger_rounds)
+    for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
+        if round_number > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
+            beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
             policy.eval()
             data = collect_round(policy, expert, args, num_labels, beta, rollout_rng, device)
             policy.train()
             collected.append(data)
             inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
             targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
-            rounds.append({"round": round, "beta": beta, "labels": num_labels, "expert_fraction": float(data["expert_acted"].mean()), "aggregate": len(inputs)})
-        epochs = args.dagger_epochs if round else args.epochs
+            rounds.append({"round": round_number, "beta": beta, "labels": num_labels, "expert_fraction": float(data["expert_acted"].mean()), "aggregate": len(inputs)})
+        epochs = args.dagger_epochs if round_number else args.epochs
         steps_per_epoch = len(inputs) // args.batch_size
         total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
         for round_epoch in range(1, epochs + 1):
@@ -442,15 +442,15 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
                 step += 1
             if epoch % args.eval_every == 0 or round_epoch == epochs:
                 policy.eval()
-                final = round == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations on disjoint episodes
+                final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations on disjoint episodes
                 for k in range(3 if final else 1):
                     evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device)))))
                 policy.train()
             if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, total_epochs // 20) == 0:
                 eta = (time.time() - start) / epoch * (total_epochs - epoch) / 60
                 last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-                print(f"seed {seed} | round {round} | epoch {epoch}/{total_epochs} | loss {loss.item():.5f} | last eval {last} | ETA {eta:.1f} min", flush=True)
-        if round == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
+                print(f"seed {seed} | round {round_number} | epoch {epoch}/{total_epochs} | loss {loss.item():.5f} | last eval {last} | ETA {eta:.1f} min", flush=True)
+        if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
     return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim,
