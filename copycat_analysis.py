@@ -1,0 +1,647 @@
+# Causal diagnostics of the copycat shortcut for saved BC-SO, BC-OH and C2F models (paper section 5.4, H3); see README.md
+"""Interventions that show whether a policy copies the previous action instead of reading the current frame.
+
+Loads the models that bc_so.py, bc_oh.py and c2f.py write with --save-model for one env and, on held-out
+expert demonstrations (with fresh velocity noise) and on each policy's own rollouts in the noisy env, measures
+
+1. do(o_hist) = [o_t, ..., o_t]: how far each policy's action moves when its history is replaced by the
+   current frame repeated (mean |change| per action dim / the demo actions' std), and how often the real
+   history pulls the action towards the previous action a_{t-1};
+2. do(zeta), C2F only: CE_d = |pi_theta(o_hist, do(zeta_d = lo_d))_d - pi_theta(o_hist, do(zeta_d = hi_d))_d|
+   per action dim d, the other zeta dims left at the coarse model's output, lo_d / hi_d the 5th / 95th
+   percentiles of the demo actions;
+3. the copycat score on held-out demos: at action changepoints (top decile of |a_t - a_{t-1}|), the fraction
+   of predictions closer to a_{t-1} than to a_t.
+
+It prints a table and writes the pictures and a JSON report to --out-dir.
+
+    python bc_so.py --env Hopper-v4 --seeds 1 --save-model     # likewise bc_oh.py and c2f.py
+    python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
+"""
+import json
+import os
+import sys
+from dataclasses import asdict, dataclass
+from types import SimpleNamespace
+from typing import Optional
+
+import gymnasium as gym
+import matplotlib
+import numpy as np
+import torch
+import torch.nn as nn
+import tyro
+
+matplotlib.use("Agg")  # files only, no display
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
+
+gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+METHODS = ("bc_so", "bc_oh", "c2f")
+COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green"}
+
+
+@dataclass
+class Args:
+    env: str = "Hopper-v4"
+    """gymnasium MuJoCo env id the models were trained on"""
+    bc_so: str = "runs/bc_so/{env}/seed1.pt"
+    """BC-SO model written by `bc_so.py --save-model`"""
+    bc_oh: str = "runs/bc_oh/{env}/seed1.pt"
+    """BC-OH model written by `bc_oh.py --save-model`"""
+    c2f: str = "runs/c2f/{env}/seed1.pt"
+    """C2F model written by `c2f.py --save-model` (with --coarse-output action, the default)"""
+    demos: Optional[str] = None
+    """held-out demonstrations (.npz, the method scripts' format); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
+    expert: str = "experts/{env}.pt"
+    """expert checkpoint that generates the held-out demos when --demos is not given"""
+    num_samples: int = 5000
+    """held-out demo steps to generate when --demos is not given"""
+    obs_noise_std: Optional[float] = None
+    """std of the velocity noise on the demos' and the rollouts' observations (default: the models' training value)"""
+    history: Optional[int] = None
+    """frames in the history (default: the models'; it must be the BC-OH and C2F models' own)"""
+    episodes: int = 3
+    """rollout episodes of each policy in the noisy env"""
+    zeta_quantile: float = 0.05
+    """do(zeta_d) = lo_d / hi_d: the q and 1-q quantiles of the demo actions of dim d (0: their min and max)"""
+    changepoint_quantile: float = 0.9
+    """changepoints of the copycat score: the steps whose |a_t - a_{t-1}| is above this quantile (0.9: the top decile)"""
+    out_dir: str = "analysis/{env}"
+    """where the pictures and the JSON report are written"""
+    seed: int = 1
+    """seed of the held-out demos (not 0, the training demos' seed), of their noise and of the rollouts"""
+
+
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Env: the partially observed setting of the paper (noisy velocities)
+
+
+# Copied from bc_oh.velocity_dims
+def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
+    """Indices of the joint velocities in the observation, where the paper adds its noise."""
+    obs_dim = env.observation_space.shape[0]
+    if override:
+        if min(override) < 0 or max(override) >= obs_dim:
+            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        return sorted(set(override))
+    structure = getattr(env.unwrapped, "observation_structure", None)
+    if structure:  # v5 envs describe their layout
+        start = structure["qpos"]  # positions come first, then the qvel block
+        return list(range(start, start + structure["qvel"]))
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # v4, NOTES.md
+    family = env_id.split("-")[0]
+    if family not in known:
+        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    return list(range(*known[family]))
+
+
+# Copied from bc_oh.VelocityNoise
+class VelocityNoise(gym.ObservationWrapper):
+    """Adds fresh N(0, std^2) noise to the velocity entries of every observation: a noisy sensor."""
+
+    def __init__(self, env: gym.Env, dims: list, std: float, seed: int):
+        super().__init__(env)
+        self.dims, self.std, self.rng = np.asarray(dims), std, np.random.default_rng(seed)
+
+    def observation(self, obs):
+        obs = np.array(obs, dtype=np.float64)
+        obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        return obs
+
+
+# Copied from bc_oh.make_env
+def make_env(env_id: str) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces."""
+    try:
+        env = gym.make(env_id)
+    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+    return env
+
+
+# ----------------------------------------------------------------------------------------------
+# Data: held-out expert demonstrations, noise, history
+
+
+# Copied from expert_ppo.ExpertPolicy
+class ExpertPolicy(nn.Module):
+    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+
+    def __init__(self, checkpoint: dict):
+        super().__init__()
+        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
+        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net.load_state_dict(checkpoint["actor"])
+        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
+            self.register_buffer(name, checkpoint[name].float())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+
+
+# Copied from expert_ppo.load_expert
+def load_expert(path: str, env_id: str) -> ExpertPolicy:
+    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    if not os.path.isfile(path):
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+    if trained_on != env_id:
+        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+    return policy.eval()
+
+
+# Copied from bc_oh.generate_demos
+def generate_demos(env_id: str, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
+    env, obs_list, action_list, starts = gym.make(env_id), [], [], []
+    obs, _ = env.reset(seed=seed)
+    start = True
+    for _ in range(num_samples):
+        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        obs_list.append(obs), action_list.append(action), starts.append(start)
+        obs, _, terminated, truncated, _ = env.step(action)
+        start = terminated or truncated
+        if start:
+            obs, _ = env.reset()
+    env.close()
+    return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
+
+
+# Copied from bc_oh.write_atomically
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as file:
+        write(file)
+    os.replace(tmp, path)
+
+
+# Copied from bc_oh.load_or_generate_demos
+def load_or_generate_demos(args, env: gym.Env) -> dict:
+    """The demos of --demos, or the cached expert rollout, generating it on first use."""
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
+    path = args.demos or f"demos/{args.env}_{num_samples}.npz"
+    if args.demos is None and not os.path.isfile(path):
+        expert_path = args.expert.format(env=args.env)
+        if not os.path.isfile(expert_path):
+            raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
+        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+        demos = generate_demos(args.env, load_expert(expert_path, args.env), num_samples)
+        meta = json.dumps({"env_id": args.env, "source": expert_path, "num_samples": num_samples, "seed": 0})
+        write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if not os.path.isfile(path):
+        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
+    n = len(demos["actions"])
+    if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
+        raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
+    if n <= args.batch_size:
+        raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
+    demos["episode_starts"] = demos["episode_starts"].astype(bool)
+    demos["episode_starts"][0] = True
+    return demos
+
+
+def heldout_demos(args, env: gym.Env) -> dict:
+    """--demos, or a fresh expert rollout from reset seed --seed: states the policies were not trained on."""
+    if args.demos is not None:  # the loader of the method scripts checks the file and its shapes
+        return load_or_generate_demos(SimpleNamespace(demos=args.demos, env=args.env, num_demo_samples=None, expert=args.expert, batch_size=1), env)
+    expert_path = args.expert.format(env=args.env)
+    if not os.path.isfile(expert_path):
+        raise UsageError(f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos")
+    print(f"generating {args.num_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})")
+    return generate_demos(args.env, load_expert(expert_path, args.env), args.num_samples, seed=args.seed)
+
+
+# Copied from bc_oh.add_obs_noise
+def add_obs_noise(observations: np.ndarray, dims: list, std: float, seed: int) -> np.ndarray:
+    """Noise on the velocity entries, drawn once per demo sample, as a noisy sensor at collection time."""
+    noisy = observations.copy()
+    noisy[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(noisy), len(dims)))
+    return noisy
+
+
+# Copied from bc_oh.stack_history
+def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
+    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
+    index = np.arange(len(observations))
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
+    return np.concatenate(frames, axis=1)
+
+
+# Copied from bc_oh.HistoryStacker
+class HistoryStacker:
+    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
+
+    def __init__(self, history: int):
+        self.history, self.frames = history, None
+
+    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
+        if self.frames is None:
+            self.frames = np.repeat(obs[:, None], self.history, axis=1)
+        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
+        self.frames[episode_start] = obs[episode_start][:, None]
+        return self.frames.reshape(len(obs), -1)
+
+
+# ----------------------------------------------------------------------------------------------
+# Networks: the three policies, rebuilt from their checkpoints
+
+
+# Copied from bc_oh.mlp
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP."""
+    return nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim))
+
+
+# Copied from bc_oh.Normalizer
+class Normalizer(nn.Module):
+    """Standardises inputs with statistics of the training demos, stored with the model."""
+
+    def __init__(self, inputs: torch.Tensor):
+        super().__init__()
+        self.register_buffer("mean", inputs.mean(0))
+        self.register_buffer("std", inputs.std(0).clamp_min(1e-6))
+
+    def forward(self, x):
+        return (x - self.mean) / self.std
+
+
+# Copied from bc_so.Policy with Policy->SOPolicy
+class SOPolicy(nn.Module):
+    """BC-SO: only the current frame o_t, the last obs_dim entries of the stacked history, into one MLP."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
+        super().__init__()
+        self.obs_dim = obs_dim
+        self.normalize = Normalizer(inputs[:, -obs_dim:])
+        self.net = mlp(obs_dim, act_dim, hidden)
+
+    def forward(self, obs_history):
+        return self.net(self.normalize(obs_history[:, -self.obs_dim:]))
+
+
+# Copied from bc_oh.Policy with Policy->OHPolicy
+class OHPolicy(nn.Module):
+    """BC-OH: the whole history, flattened, into one MLP."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.net = mlp(obs_dim * history, act_dim, hidden)
+
+    def forward(self, obs_history):
+        return self.net(self.normalize(obs_history))
+
+
+# Copied from c2f.Policy with Policy->C2FPolicy
+class C2FPolicy(nn.Module):
+    """C2F: the coarse model on o_t gives zeta; the policy model on the history, joined by sg(zeta), the final action."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
+                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
+        self.coarse_input, self.policy_input = coarse_input, policy_input
+        self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
+        fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
+        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late")}
+        policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
+        self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
+        self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+        self.head = nn.Linear(hidden + extra["late"], act_dim)  # the one more linear layer of the paper
+
+    def pick(self, x, which: str):
+        """The normalised history itself, or its last frame o_t."""
+        return x if which == "history" else x[:, -self.obs_dim:]
+
+    def coarse_model(self, obs_history):
+        """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
+        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
+        return self.coarse[-1](feature), feature
+
+    def coarse_and_final(self, obs_history):
+        """(zeta, final action = pi_theta(history, sg(zeta))): the two outputs Eq. 2 trains."""
+        zeta, feature = self.coarse_model(obs_history)
+        fed = feature if self.coarse_output == "feature" else zeta
+        fed = fed.detach() if self.stop_gradient else fed
+        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
+        h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
+        h = self.policy_rest(join(h, "middle"))
+        return zeta, self.head(join(h, "late"))
+
+    def forward(self, obs_history):
+        return self.coarse_and_final(obs_history)[1]
+
+
+def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
+    """Rebuild the policy a method script saved with --save-model; returns (policy, its training args)."""
+    flag = "--" + method.replace("_", "-")
+    if not os.path.isfile(path):
+        raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model`, or pass {flag} PATH")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        saved_method, saved_env, saved = checkpoint["method"], checkpoint["env_id"], checkpoint["args"]
+    except Exception as error:
+        raise UsageError(f"{flag} {path} is not a model saved with --save-model ({type(error).__name__}): pass a seed<S>.pt written by {method}.py")
+    if saved_method != method:
+        raise UsageError(f"{flag} {path} is a {saved_method} model, not {method}: pass the model written by {method}.py")
+    if saved_env != env_id:
+        raise UsageError(f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}")
+    if method == "c2f" and saved.get("coarse_output") == "feature":
+        raise UsageError(f"{flag} {path} passes a feature, not an action zeta, to its policy model: do(zeta) needs a C2F model trained with --coarse-output action")
+    history, hidden, inputs = saved["history"], saved["hidden"], torch.zeros(2, obs_dim * saved["history"])  # the Normalizer's statistics come from the state_dict
+    if method == "bc_so":
+        policy = SOPolicy(obs_dim, act_dim, history, hidden, inputs)
+    elif method == "bc_oh":
+        policy = OHPolicy(obs_dim, act_dim, history, hidden, inputs)
+    else:
+        policy = C2FPolicy(obs_dim, act_dim, history, hidden, inputs, saved["fusion"], saved["coarse_output"],
+                           saved["coarse_input"], saved["policy_input"], saved["stop_gradient"])
+    try:
+        policy.load_state_dict(checkpoint["state_dict"])
+    except RuntimeError:
+        raise UsageError(f"{flag} {path}: its weights do not fit a {method} policy with history {history} on {env_id}'s {obs_dim}-d observations: re-save it with {method}.py")
+    return policy.eval(), saved
+
+
+def agreed(saved: dict, key: str, flag: str, readers=METHODS, fix="pass models trained alike"):
+    """The training value of `key` shared by the models in `readers`, or a clear error when they differ."""
+    values = {method: saved[method].get(key) for method in readers}
+    if len(set(map(str, values.values()))) > 1:
+        raise UsageError(f"the models were trained with different {flag} ({values}): {fix}")
+    return values[readers[0]]
+
+
+def as_actor(policy: nn.Module, low: np.ndarray, high: np.ndarray):
+    """numpy histories (N, H * obs_dim) -> the clipped actions the env would execute."""
+
+    @torch.no_grad()
+    def act(histories: np.ndarray) -> np.ndarray:
+        return policy(torch.as_tensor(histories, dtype=torch.float32)).numpy().clip(low, high)
+
+    return act
+
+
+def zeta_intervention(policy: C2FPolicy, low: np.ndarray, high: np.ndarray):
+    """numpy (coarse, final): zeta = pi_phi(o_t), and pi_theta(o_hist, do(zeta)) clipped to the action bounds."""
+
+    @torch.no_grad()
+    def coarse(histories: np.ndarray) -> np.ndarray:
+        return policy.coarse_model(torch.as_tensor(histories, dtype=torch.float32))[0].numpy()
+
+    @torch.no_grad()
+    def final(histories: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+        obs_history = torch.as_tensor(histories, dtype=torch.float32)
+        fixed, feature = torch.as_tensor(zeta, dtype=torch.float32), policy.coarse_model(obs_history)[1]
+        policy.coarse_model = lambda _: (fixed, feature)  # shadows the method for one call: the rest of the forward is the trained one
+        try:
+            return policy.coarse_and_final(obs_history)[1].numpy().clip(low, high)
+        finally:
+            del policy.coarse_model
+
+    return coarse, final
+
+
+# ----------------------------------------------------------------------------------------------
+# Interventions and scores (plain numpy functions of policies: histories -> actions)
+
+
+def distance(a: np.ndarray, b: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per row, the Euclidean distance of two actions measured in units of the demo actions' std."""
+    return np.linalg.norm((a - b) / scale, axis=1)
+
+
+def repeat_current(histories: np.ndarray, obs_dim: int) -> np.ndarray:
+    """do(o_hist) = [o_t, ..., o_t]: every frame of each history replaced by its current (last) frame."""
+    return np.tile(histories[:, -obs_dim:], histories.shape[1] // obs_dim)
+
+
+def history_intervention(act, histories: np.ndarray, obs_dim: int, prev_actions: np.ndarray, scale: np.ndarray):
+    """Per step: how far the action moves under do(o_hist) (mean over dims of |change| / scale), and whether
+    the real history pulls it towards a_{t-1} (pi(o_hist) strictly closer to a_{t-1} than pi(do(o_hist)))."""
+    factual, counterfactual = act(histories), act(repeat_current(histories, obs_dim))
+    change = (np.abs(factual - counterfactual) / scale).mean(1)
+    towards = distance(factual, prev_actions, scale) < distance(counterfactual, prev_actions, scale)
+    return change, towards
+
+
+def changepoints(actions: np.ndarray, episode_starts: np.ndarray, scale: np.ndarray, quantile: float) -> np.ndarray:
+    """Steps t with a predecessor in their episode whose |a_t - a_{t-1}| (scaled) is at or above its `quantile`."""
+    steps = np.flatnonzero(~episode_starts.astype(bool))
+    steps = steps[steps > 0]
+    jump = distance(actions[steps], actions[steps - 1], scale)
+    return steps[jump >= np.quantile(jump, quantile)]
+
+
+def copycat_score(predictions: np.ndarray, actions: np.ndarray, points: np.ndarray, scale: np.ndarray) -> float:
+    """The fraction of the changepoints t whose prediction is closer to a_{t-1} than to a_t."""
+    to_prev = distance(predictions[points], actions[points - 1], scale)
+    return float(np.mean(to_prev < distance(predictions[points], actions[points], scale)))
+
+
+def zeta_effect(final, histories: np.ndarray, zeta: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """CE[t, d] = |final(h_t, zeta_t with zeta_d = lo_d)_d - final(h_t, zeta_t with zeta_d = hi_d)_d|."""
+    effect = np.zeros_like(zeta, dtype=np.float64)
+    for d in range(zeta.shape[1]):
+        low_zeta, high_zeta = zeta.copy(), zeta.copy()
+        low_zeta[:, d], high_zeta[:, d] = lo[d], hi[d]
+        effect[:, d] = np.abs(final(histories, low_zeta)[:, d] - final(histories, high_zeta)[:, d])
+    return effect
+
+
+# ----------------------------------------------------------------------------------------------
+# Rollouts of each policy in the noisy env
+
+
+def rollout(act, env_id: str, dims: list, std: float, history: int, seed: int) -> dict:
+    """One episode of the deterministic policy on the noisy env: its histories, executed actions,
+    observations (the positions are noise-free) and return."""
+    env = VelocityNoise(gym.make(env_id), dims, std, seed)
+    obs, _ = env.reset(seed=seed)
+    stacker, record, total, done = HistoryStacker(history), {"histories": [], "actions": [], "observations": []}, 0.0, False
+    while not done:
+        histories = stacker.push(obs[None], np.array([len(record["actions"]) == 0]))  # a new episode on the first step
+        action = act(histories)[0]
+        record["histories"].append(histories[0]), record["actions"].append(action), record["observations"].append(obs)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total, done = total + float(reward), terminated or truncated
+    env.close()
+    return {**{key: np.array(value) for key, value in record.items()}, "return": total}
+
+
+def with_previous(episodes: list):
+    """(histories, previous actions) of every step but each episode's first, over a list of rollouts."""
+    histories = np.concatenate([episode["histories"][1:] for episode in episodes])
+    return histories, np.concatenate([episode["actions"][:-1] for episode in episodes])
+
+
+# ----------------------------------------------------------------------------------------------
+# Pictures
+
+ACTION_NAMES = {"Hopper": ["thigh", "leg", "foot"], "Walker2d": ["right thigh", "right leg", "right foot", "left thigh", "left leg", "left foot"]}
+STATE_ROWS = {"Hopper": [(0, "torso height (m)"), (2, "thigh angle (rad)")], "Walker2d": [(0, "torso height (m)"), (2, "right thigh angle (rad)")]}
+
+
+def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: np.ndarray, lo: np.ndarray, hi: np.ndarray, episode_return: float):
+    """CE_d / (hi_d - lo_d) along one trajectory (1: the action follows zeta fully, 0: ignores it), the state beneath."""
+    family = env_id.split("-")[0]
+    names = ACTION_NAMES.get(family, [f"a[{d}]" for d in range(effect.shape[1])])
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(11, 6), gridspec_kw={"height_ratios": [2, 1]})
+    for d in range(effect.shape[1]):
+        top.plot(effect[:, d] / (hi[d] - lo[d]), lw=1, label=f"{names[d]}: do(zeta) = {lo[d]:.2f} vs {hi[d]:.2f}")
+    top.set_ylabel("CE / (hi - lo)")
+    if np.ptp(effect, axis=0).max() < 1e-6:  # e.g. late fusion: the final layer is linear in zeta
+        top.text(0.01, 0.03, "constant along the trajectory: the action is linear in zeta here (late fusion's linear head), "
+                 "so CE changes only where an action is clipped at its bounds", transform=top.transAxes, fontsize=8)
+    top.set_title(f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta")
+    top.legend(loc="upper right", fontsize=8)
+    top.grid(alpha=0.3)
+    rows = STATE_ROWS.get(family, [(0, "obs[0]"), (1, "obs[1]")])
+    bottom.plot(observations[:, rows[0][0]], color="black", lw=1)
+    bottom.set_ylabel(rows[0][1])
+    twin = bottom.twinx()
+    twin.plot(observations[:, rows[1][0]], color="tab:purple", lw=1)
+    twin.set_ylabel(rows[1][1], color="tab:purple")
+    bottom.set_xlabel("step")
+    fig.tight_layout()
+    write_atomically(path, lambda file: fig.savefig(file, format="png", dpi=110))
+    plt.close(fig)
+
+
+def plot_history_intervention(path: str, env_id: str, changes: dict):
+    """Per source (held-out demos, own rollouts), the distribution of each method's per-step |change| under do(o_hist)."""
+    fig, axes = plt.subplots(1, len(changes), figsize=(6 * len(changes), 4))
+    for ax, (source, per_method) in zip(np.atleast_1d(axes), changes.items()):
+        top = max(float(np.quantile(np.concatenate(list(per_method.values())), 0.99)), 1e-3)
+        bins = np.linspace(0, top, 41)
+        for method, change in per_method.items():
+            ax.hist(np.minimum(change, top), bins, weights=np.full(len(change), 1 / len(change)), histtype="step", lw=1.5,
+                    color=COLORS[method], label=f"{method} (mean {change.mean():.3f})")
+        ax.set_yscale("log")
+        ax.set_xlabel("mean |pi(o_hist) - pi(do(o_hist) = [o_t, ..., o_t])| / demo action std\n(above the 99th percentile: last bin)")
+        ax.set_ylabel("fraction of steps")
+        ax.set_title(f"{env_id}: intervention on the history, {source}")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    write_atomically(path, lambda file: fig.savefig(file, format="png", dpi=110))
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------------------------
+# The analysis
+
+
+def check_args(args):
+    """Reject bad values before anything slow happens."""
+    if args.num_samples < 2:
+        raise UsageError(f"--num-samples must be at least 2, got {args.num_samples}")
+    if args.episodes <= 0:
+        raise UsageError(f"--episodes must be positive, got {args.episodes}")
+    if args.history is not None and args.history <= 0:
+        raise UsageError(f"--history must be positive, got {args.history}")
+    if args.obs_noise_std is not None and args.obs_noise_std < 0:
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+    if not 0 <= args.zeta_quantile < 0.5:
+        raise UsageError(f"--zeta-quantile must lie in [0, 0.5), got {args.zeta_quantile}")
+    if not 0 <= args.changepoint_quantile < 1:
+        raise UsageError(f"--changepoint-quantile must lie in [0, 1), got {args.changepoint_quantile}")
+    if args.demos is None and args.seed == 0:
+        raise UsageError("--seed 0 would regenerate the training demonstrations: use another seed for held-out demos")
+
+
+def run(args):
+    """Load the three models, intervene on held-out demos and on their own rollouts, report and draw."""
+    check_args(args)
+    env = make_env(args.env)
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    low, high = env.action_space.low, env.action_space.high
+    models, saved = {}, {}
+    for method in METHODS:
+        models[method], saved[method] = load_model(getattr(args, method).format(env=args.env), method, args.env, obs_dim, act_dim)
+    model_history = agreed(saved, "history", "--history", ("bc_oh", "c2f"), "pass models trained with one history length")  # BC-SO reads o_t only: any history fits it
+    history = args.history or model_history
+    if history != model_history:
+        raise UsageError(f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}")
+    std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix="pass --obs-noise-std for the analysis") if args.obs_noise_std is None else args.obs_noise_std
+    dims = velocity_dims(env, args.env, agreed(saved, "velocity_dims", "--velocity-dims"))
+
+    demos = heldout_demos(args, env)
+    actions, starts = demos["actions"].astype(np.float64), demos["episode_starts"]
+    scale = actions.std(0).clip(1e-6)  # the expert's action scale, per dim
+    lo, hi = np.quantile(actions, args.zeta_quantile, axis=0), np.quantile(actions, 1 - args.zeta_quantile, axis=0)
+    histories = stack_history(add_obs_noise(demos["observations"], dims, std, args.seed), starts, history)
+    steps = np.flatnonzero(~starts)  # steps with a previous action in their episode
+    points = changepoints(actions, starts, scale, args.changepoint_quantile)
+
+    actors = {method: as_actor(models[method], low, high) for method in METHODS}
+    rollouts = {method: [rollout(actors[method], args.env, dims, std, history, 1000 * args.seed + i) for i in range(args.episodes)] for method in METHODS}
+    changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
+    for method in METHODS:
+        change, towards = history_intervention(actors[method], histories[steps], obs_dim, actions[steps - 1], scale)
+        roll_histories, roll_prev = with_previous(rollouts[method])
+        roll_change, roll_towards = history_intervention(actors[method], roll_histories, obs_dim, roll_prev, scale)
+        changes["held-out demos"][method], changes["own rollouts"][method] = change, roll_change
+        report[method] = {
+            "model": getattr(args, method).format(env=args.env),
+            "rollout_returns": [episode["return"] for episode in rollouts[method]],
+            "history_change_demos": float(change.mean()), "towards_previous_demos": float(towards.mean()),
+            "history_change_rollouts": float(roll_change.mean()), "towards_previous_rollouts": float(roll_towards.mean()),
+            "copycat_score": copycat_score(actors[method](histories), actions, points, scale),
+        }
+    coarse, final = zeta_intervention(models["c2f"], low, high)
+    c2f_histories = np.concatenate([episode["histories"] for episode in rollouts["c2f"]])
+    effect_demos = zeta_effect(final, histories, coarse(histories), lo, hi)
+    effect_rollouts = zeta_effect(final, c2f_histories, coarse(c2f_histories), lo, hi)
+    first = rollouts["c2f"][0]
+    zeta = {"lo": lo.tolist(), "hi": hi.tolist(), "effect_demos": effect_demos.mean(0).tolist(), "effect_rollouts": effect_rollouts.mean(0).tolist(),
+            "relative_demos": (effect_demos.mean(0) / (hi - lo)).tolist(), "relative_rollouts": (effect_rollouts.mean(0) / (hi - lo)).tolist()}
+
+    out_dir = args.out_dir.format(env=args.env)
+    plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"])
+    plot_history_intervention(os.path.join(out_dir, "history_intervention.png"), args.env, changes)
+    summary = {"env": args.env, "args": asdict(args), "history": history, "obs_noise_std": std, "demo_steps": len(actions),
+               "changepoints": len(points), "action_std": scale.tolist(), "methods": report, "zeta": zeta}
+    write_atomically(os.path.join(out_dir, "copycat_analysis.json"), lambda file: file.write(json.dumps(summary, indent=1).encode()))
+
+    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.episodes} rollouts per policy, noise std {std}, history {history}")
+    print("do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}")
+    print(f"{'method':>6} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
+    for method, row in report.items():
+        print(f"{method:>6} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
+              f"{row['history_change_rollouts']:15.3f} | {row['towards_previous_rollouts']:7.2f} | {row['copycat_score']:13.2f}")
+    print("do(zeta), c2f: CE = |pi(do(zeta_d) = lo_d) - pi(do(zeta_d) = hi_d)|_d, and CE / (hi - lo)")
+    print(f"{'dim':>3} | {'lo':>6} | {'hi':>6} | {'CE demos':>8} | {'rel':>5} | {'CE rollouts':>11} | {'rel':>5}")
+    for d in range(act_dim):
+        print(f"{d:>3} | {lo[d]:6.2f} | {hi[d]:6.2f} | {zeta['effect_demos'][d]:8.3f} | {zeta['relative_demos'][d]:5.2f} | "
+              f"{zeta['effect_rollouts'][d]:11.3f} | {zeta['relative_rollouts'][d]:5.2f}")
+    print(f"pictures and report: {out_dir}/ (zeta_effect.png, history_intervention.png, copycat_analysis.json)")
+
+
+if __name__ == "__main__":
+    try:
+        run(tyro.cli(Args))
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)

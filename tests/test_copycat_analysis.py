@@ -1,0 +1,245 @@
+"""copycat_analysis.py: the interventions and scores on hand-made policies (a copycat scores high, a policy
+that ignores the history zero; do(zeta) of a zeta-blind policy is zero, of a pass-through the gap), and the
+script on tiny models saved by the real bc_so.py, bc_oh.py and c2f.py (bad input, the report, the pictures)."""
+import importlib
+import json
+import os
+
+import numpy as np
+import pytest
+import torch
+import torch.nn as nn
+import tyro
+
+import copycat_analysis as ca
+from conftest import assert_usage_error, link_experts, run_script
+
+OBS, ACT, H = 4, 2, 2
+W = np.array([[1.0, -0.5, 0.3, 0.0], [0.2, 0.8, -1.0, 0.5]])  # the hand-made expert: a_t = W o_t
+
+
+@pytest.fixture(scope="module")
+def demos():
+    """Three 100-step episodes of a random walk in observation space, labelled by the linear expert."""
+    rng = np.random.default_rng(0)
+    observations = np.cumsum(rng.normal(size=(300, OBS)) * rng.exponential(size=(300, 1)), axis=0)
+    starts = np.arange(300) % 100 == 0
+    actions = observations @ W.T
+    return {"observations": observations, "actions": actions, "episode_starts": starts,
+            "histories": ca.stack_history(observations, starts, H), "scale": actions.std(0)}
+
+
+def copycat(histories):
+    """Acts on the oldest frame, o_{t-1}: outputs the previous frame's implied action a_{t-1}."""
+    return histories[:, :OBS] @ W.T
+
+
+def reads_current(histories):
+    """Ignores the history: the expert's action on o_t."""
+    return histories[:, -OBS:] @ W.T
+
+
+def with_prev(demos):
+    steps = np.flatnonzero(~demos["episode_starts"])
+    return demos["histories"][steps], demos["actions"][steps - 1], demos["actions"][steps]
+
+
+def test_repeat_current_puts_the_current_frame_everywhere(demos):
+    repeated = ca.repeat_current(demos["histories"], OBS)
+    assert repeated.shape == demos["histories"].shape
+    for frame in range(H):
+        np.testing.assert_array_equal(repeated[:, frame * OBS:(frame + 1) * OBS], demos["observations"])
+
+
+def test_history_intervention_copycat_moves_towards_the_previous_action(demos):
+    histories, prev, current = with_prev(demos)
+    change, towards = ca.history_intervention(copycat, histories, OBS, prev, demos["scale"])
+    # do(o_hist) turns a_{t-1} into a_t: the change is exactly |a_t - a_{t-1}| / scale, always away from a_{t-1}
+    np.testing.assert_allclose(change, (np.abs(current - prev) / demos["scale"]).mean(1))
+    assert change.min() > 0
+    assert towards.all()
+
+
+def test_history_intervention_of_a_history_blind_policy_is_zero(demos):
+    histories, prev, _ = with_prev(demos)
+    change, towards = ca.history_intervention(reads_current, histories, OBS, prev, demos["scale"])
+    assert np.all(change == 0) and not towards.any()
+
+
+def test_history_intervention_through_a_torch_module(demos):
+    """as_actor wraps a torch module: a linear copycat on the flattened history, clipped to the bounds."""
+    module = nn.Linear(H * OBS, ACT, bias=False)
+    with torch.no_grad():
+        module.weight.zero_()
+        module.weight[:, :OBS] = torch.as_tensor(W, dtype=torch.float32)
+    histories, prev, current = with_prev(demos)
+    act = ca.as_actor(module, np.full(ACT, -1e9), np.full(ACT, 1e9))
+    change, towards = ca.history_intervention(act, histories, OBS, prev, demos["scale"])
+    np.testing.assert_allclose(change, (np.abs(current - prev) / demos["scale"]).mean(1), rtol=1e-4, atol=1e-4)
+    assert towards.mean() > 0.99
+    clipped = ca.as_actor(module, np.full(ACT, -0.1), np.full(ACT, 0.1))(histories)
+    assert clipped.min() >= -0.1 and clipped.max() <= 0.1
+
+
+def test_changepoints_are_the_largest_jumps_inside_episodes():
+    actions = np.zeros((40, 1))
+    actions[[5, 25]] = 3.0  # jumps at 5 and 25 (and back at 6 and 26), and a new episode starting at 20 ...
+    actions[20:] += 10.0  # ... whose start is a jump of 10 that must not count
+    starts = np.arange(40) % 20 == 0
+    points = ca.changepoints(actions, starts, np.ones(1), quantile=0.9)
+    np.testing.assert_array_equal(points, [5, 6, 25, 26])
+
+
+def test_copycat_score_is_one_for_the_copycat_and_zero_for_the_expert(demos):
+    points = ca.changepoints(demos["actions"], demos["episode_starts"], demos["scale"], 0.9)
+    assert len(points) >= 25 and not demos["episode_starts"][points].any()
+    args = (demos["actions"], points, demos["scale"])
+    assert ca.copycat_score(copycat(demos["histories"]), *args) == 1.0
+    assert ca.copycat_score(reads_current(demos["histories"]), *args) == 0.0
+
+
+LO, HI = np.array([-0.5, 0.1]), np.array([0.7, 0.9])
+
+
+def test_zeta_effect_of_a_zeta_blind_policy_is_zero_and_of_a_pass_through_the_gap(demos):
+    zeta = reads_current(demos["histories"])
+    blind = ca.zeta_effect(lambda h, z: reads_current(h), demos["histories"], zeta, LO, HI)
+    through = ca.zeta_effect(lambda h, z: z, demos["histories"], zeta, LO, HI)
+    assert blind.shape == through.shape == (300, ACT)
+    assert np.all(blind == 0)
+    np.testing.assert_allclose(through, np.broadcast_to(HI - LO, through.shape))
+    # only zeta_d is set: a policy that passes zeta_0 into both outputs shows no effect of zeta_1 on output 1
+    cross = ca.zeta_effect(lambda h, z: z[:, [0, 0]], demos["histories"], zeta, LO, HI)
+    np.testing.assert_allclose(cross[:, 0], HI[0] - LO[0])
+    assert np.all(cross[:, 1] == 0)
+
+
+def c2f_policy(zeta_weight: float):
+    """A real C2F policy (late fusion) whose head passes zeta through with this weight and ignores the rest."""
+    torch.manual_seed(0)
+    policy = ca.C2FPolicy(OBS, ACT, H, 8, torch.randn(16, H * OBS))
+    with torch.no_grad():
+        policy.head.weight.zero_()
+        policy.head.bias.zero_()
+        policy.head.weight[:, 8:] = zeta_weight * torch.eye(ACT)
+    return policy.eval()
+
+
+@pytest.mark.parametrize("weight", [0.0, 1.0])
+def test_zeta_intervention_on_a_c2f_model(demos, weight):
+    policy = c2f_policy(weight)
+    coarse, final = ca.zeta_intervention(policy, np.full(ACT, -5.0), np.full(ACT, 5.0))
+    zeta = coarse(demos["histories"])
+    np.testing.assert_allclose(final(demos["histories"], zeta), policy(torch.as_tensor(demos["histories"], dtype=torch.float32)).detach().numpy(), atol=1e-6)
+    effect = ca.zeta_effect(final, demos["histories"], zeta, LO, HI)
+    np.testing.assert_allclose(effect, np.broadcast_to(weight * (HI - LO), effect.shape), atol=1e-6)
+    assert "coarse_model" not in vars(policy), "the intervention leaves the model as it was"
+
+
+# ---------------------------------------------------------------------------------------------
+# The script, on tiny models saved by the method scripts
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """Tiny models of the three methods, saved by the real scripts' run() from their command lines
+    (in-process: three interpreter starts would cost more than the training)."""
+    workdir = link_experts(tmp_path_factory.mktemp("copycat"))
+    budget = ["--epochs", "1", "--num-demo-samples", "300", "--eval-episodes", "1", "--seeds", "1", "--save-model"]
+    cwd = os.getcwd()
+    os.chdir(workdir)  # demos/ is cached relative to the working directory
+    try:
+        for method in ca.METHODS:
+            script = importlib.import_module(method)
+            script.run(tyro.cli(script.Args, args=[*budget, "--output-dir", f"models/{method}"]))
+    finally:
+        os.chdir(cwd)
+    return workdir, {method: workdir / "models" / method / "seed1.pt" for method in ca.METHODS}
+
+
+def model_flags(paths, **overrides):
+    flags = []
+    for method in ca.METHODS:
+        flags += ["--" + method.replace("_", "-"), overrides.get(method, paths[method])]
+    return flags
+
+
+def test_report_and_pictures_on_saved_models(saved):
+    workdir, paths = saved
+    result = run_script("copycat_analysis.py", *model_flags(paths), "--num-samples", 300, "--episodes", 1, "--out-dir", "out", cwd=workdir)
+    assert result.returncode == 0, result.stderr
+    assert "copycat score" in result.stdout and "do(zeta)" in result.stdout
+    report = json.loads((workdir / "out" / "copycat_analysis.json").read_text())
+    assert report["demo_steps"] == 300 and report["changepoints"] >= 29 and report["history"] == 2
+    bc_so = report["methods"]["bc_so"]  # reads o_t only: do(o_hist) cannot move it
+    assert bc_so["history_change_demos"] == 0 and bc_so["towards_previous_rollouts"] == 0
+    assert report["methods"]["bc_oh"]["history_change_demos"] > 0
+    for row in report["methods"].values():
+        assert 0 <= row["copycat_score"] <= 1 and len(row["rollout_returns"]) == 1
+    zeta = report["zeta"]
+    assert all(lo < hi for lo, hi in zip(zeta["lo"], zeta["hi"]))
+    assert all(0 <= value <= 1 for value in zeta["relative_demos"] + zeta["relative_rollouts"])
+    for picture in ("zeta_effect.png", "history_intervention.png"):
+        assert (workdir / "out" / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_model_of_another_method_is_rejected_in_one_line(saved):
+    workdir, paths = saved
+    result = run_script("copycat_analysis.py", *model_flags(paths, bc_so=paths["c2f"]), cwd=workdir)
+    assert result.returncode == 2
+    assert_usage_error(result, "is a c2f model, not bc_so")
+
+
+def bad_run(workdir, paths, monkeypatch, **settings):
+    """run() in-process (faster than a subprocess); returns the UsageError's message."""
+    monkeypatch.chdir(workdir)
+    models = {method: str(settings.pop(method, paths[method])) for method in ca.METHODS}
+    with pytest.raises(ca.UsageError) as error:
+        ca.run(ca.Args(**models, **{"num_samples": 300, "episodes": 1, "out_dir": "bad", **settings}))
+    assert not (workdir / "bad").exists(), "nothing is written on bad input"
+    return str(error.value)
+
+
+def test_missing_model(saved, monkeypatch):
+    message = bad_run(*saved, monkeypatch, bc_oh="nowhere/seed1.pt")
+    assert "bc_oh model nowhere/seed1.pt not found" in message and "--save-model" in message
+
+
+def test_history_that_does_not_match_the_models(saved, monkeypatch):
+    assert "--history 3 does not match the models, trained with history 2" in bad_run(*saved, monkeypatch, history=3)
+
+
+def test_model_of_another_env(saved, monkeypatch):
+    assert "is a model of Hopper-v4, not HalfCheetah-v4" in bad_run(*saved, monkeypatch, env="HalfCheetah-v4")
+
+
+def test_weights_that_do_not_fit_the_saved_history(saved, monkeypatch, tmp_path):
+    """A checkpoint whose recorded history disagrees with its weights is refused, not half-loaded."""
+    workdir, paths = saved
+    checkpoint = torch.load(paths["bc_oh"], weights_only=True)
+    checkpoint["args"]["history"] = 3
+    torch.save(checkpoint, tmp_path / "edited.pt")
+    assert "its weights do not fit a bc_oh policy with history 3" in bad_run(workdir, paths, monkeypatch, bc_oh=tmp_path / "edited.pt")
+
+
+def test_c2f_without_an_action_zeta_and_a_non_model_file(saved, monkeypatch, tmp_path):
+    workdir, paths = saved
+    checkpoint = torch.load(paths["c2f"], weights_only=True)
+    checkpoint["args"]["coarse_output"] = "feature"
+    torch.save(checkpoint, tmp_path / "feature.pt")
+    assert "--coarse-output action" in bad_run(workdir, paths, monkeypatch, c2f=tmp_path / "feature.pt")
+    (tmp_path / "junk.pt").write_text("not a model")
+    assert "is not a model saved with --save-model" in bad_run(workdir, paths, monkeypatch, c2f=tmp_path / "junk.pt")
+
+
+def test_bad_values(saved, monkeypatch):
+    assert "--seed 0 would regenerate the training demonstrations" in bad_run(*saved, monkeypatch, seed=0)
+    assert "--zeta-quantile" in bad_run(*saved, monkeypatch, zeta_quantile=0.5)
+
+
+def test_models_of_different_history_lengths_are_refused():
+    saved = {"bc_so": {"history": 5}, "bc_oh": {"history": 2}, "c2f": {"history": 2}}
+    assert ca.agreed(saved, "history", "--history", ("bc_oh", "c2f")) == 2  # BC-SO's own history does not matter
+    saved["c2f"]["history"] = 3
+    with pytest.raises(ca.UsageError, match=r"different --history .*'bc_oh': 2, 'c2f': 3.*one history length"):
+        ca.agreed(saved, "history", "--history", ("bc_oh", "c2f"), "pass models trained with one history length")
