@@ -77,6 +77,25 @@ def skip_evaluation(monkeypatch, module, score=0.0):
     monkeypatch.setattr(module, "evaluate", lambda policy, args, episodes, seed, device: [score] * episodes)
 
 
+def smoke_run(script, directory, *extra):
+    """Run `script` with SMOKE_ARGS (plus `extra`) in `directory` (experts linked there), check that it
+    succeeds, ends with the summary line `Hopper-v4 METHOD: MEAN ± STD over 1 seeds` and writes a JSON
+    result that agrees with it; return (stdout, the JSON result as a dict)."""
+    import json
+    import re
+
+    directory = link_experts(directory)
+    result = run_script(script, *SMOKE_ARGS, "--output-dir", directory / "out", *extra, cwd=directory)
+    assert result.returncode == 0, result.stderr
+    method = Path(script).stem
+    match = re.fullmatch(rf"Hopper-v4 {method}: (-?[\d.]+) ± ([\d.]+) over 1 seeds", result.stdout.strip().splitlines()[-1])
+    assert match, result.stdout
+    summary = json.loads((directory / "out" / "result_seeds1.json").read_text())
+    assert summary["method"] == method and summary["env"] == "Hopper-v4"
+    assert abs(summary["mean"] - float(match.group(1))) <= 0.05 and list(summary["scores"]) == ["1"]
+    return result.stdout, summary
+
+
 def run_in_process(script, *args):
     """Run REPO_ROOT/script as __main__ inside this process with sys.argv = [script, *args] (no new
     interpreter: ~0.1 s instead of ~2 s, for fast bad-input checks). Returns an object with returncode,

@@ -1,0 +1,489 @@
+# KeyFrame: keyframe-focused imitation (Wen et al. 2021; paper Table 2 baseline); see README.md
+"""KeyFrame: BC-OH whose loss is weighted up on the samples where the expert's action is hard to
+predict from its own previous actions: the changepoints that a copycat policy gets wrong.
+
+First an action-prediction model (MLP, one hidden layer of 300, LeakyReLU 0.2) learns a_t from the K
+previous actions a_{t-Ks}, ..., a_{t-s} (s = --keyframe-spacing) on the demos; its squared error on each
+sample is APE_t. Then BC-OH trains with per-sample loss weights: --keyframe-weight on the top
+--keyframe-fraction of APE (the keyframes), 1 elsewhere; or, with --weighting softmax, the batch's
+softmax of APE / --keyframe-temperature.
+
+    python keyframe.py --env Hopper-v4
+"""
+import json
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from typing import List, Literal, Optional
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import tyro
+
+gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+METHOD = "keyframe"
+
+
+@dataclass
+class Args:
+    env: str = "Hopper-v4"
+    """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
+    """training seeds, run one after another; the score is mean ± std over them"""
+    demos: Optional[str] = None
+    """demonstrations (.npz, format in README); default: roll out the expert once and cache under demos/"""
+    expert: str = "experts/{env}.pt"
+    """expert checkpoint used to generate demonstrations when --demos is not given"""
+    num_demo_samples: Optional[int] = None
+    """demonstration steps to generate (default as in the paper: 20000 for Hopper, 10000 otherwise)"""
+    obs_noise_std: float = 0.2
+    """std of the Gaussian noise on the velocity entries of every observation (partial observability)"""
+    velocity_dims: Optional[List[int]] = None
+    """indices of the velocity entries, for envs not in the built-in table"""
+    history: int = 2
+    """frames in the observation history [o_{t-H+1}, ..., o_t]"""
+    epochs: int = 1000
+    """passes over the demonstrations (one epoch = num-samples / batch-size steps)"""
+    batch_size: int = 64
+    """minibatch size"""
+    learning_rate: Optional[float] = None
+    """Adam learning rate, decayed linearly to zero (default: 1e-5 for Hopper, 1e-4 otherwise, as in the paper)"""
+    hidden: int = 256
+    """width of the hidden layers of every three-layer MLP"""
+    eval_every: int = 100
+    """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
+    eval_episodes: int = 10
+    """episodes per evaluation, run in parallel on the noisy env with the deterministic policy"""
+    output_dir: str = "runs/{method}/{env}"
+    """where the JSON result (and with --save-model the checkpoints) are written"""
+    save_model: bool = False
+    """write a self-contained checkpoint per seed (weights, normalisation, args)"""
+    cuda: bool = False
+    """train on the GPU when there is one"""
+    keyframe_k: int = 4
+    """K, how many previous actions the action-prediction model sees (CARLA: 9; not published for MuJoCo.
+    4 consecutive actions, 32 ms of Hopper, are enough to extrapolate a smooth action, so the error is
+    left where the action really changes)"""
+    keyframe_spacing: int = 1
+    """frames between those actions: a_{t-K*s}, ..., a_{t-2s}, a_{t-s} (CARLA: 3; MuJoCo default 1, as a
+    MuJoCo control step, 8 ms for Hopper, is much shorter than a gait cycle)"""
+    keyframe_fraction: float = 0.1
+    """fraction of the samples, those of highest APE, that are keyframes, in (0, 1] (the authors' 10%)"""
+    keyframe_weight: float = 5.0
+    """loss weight of a keyframe in --weighting threshold; other samples weigh 1 (the authors' 5)"""
+    weighting: Literal["threshold", "softmax"] = "threshold"
+    """threshold: --keyframe-weight on the keyframes, 1 elsewhere; softmax: per batch, the softmax of
+    APE / --keyframe-temperature times the batch size (so the weights average 1)"""
+    keyframe_temperature: float = 1.0
+    """temperature of --weighting softmax"""
+    keyframe_model_epochs: int = 20
+    """passes over the demos to train the action-prediction model (Adam, lr 1e-3, --batch-size)"""
+
+    def __post_init__(self):
+        if not 0 < self.keyframe_fraction <= 1:
+            raise UsageError(f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: it is the share of samples weighted up")
+        for name in ("keyframe_k", "keyframe_spacing", "keyframe_weight", "keyframe_temperature", "keyframe_model_epochs"):
+            if not getattr(self, name) > 0:
+                raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+
+
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Env: the partially observed setting of the paper (noisy velocities)
+
+
+# Copied from bc_oh.check_common_args
+def check_common_args(args):
+    """Reject bad values of the arguments every method shares, before anything slow happens."""
+    if args.obs_noise_std < 0:
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: pass 0 for noise-free observations")
+    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"):
+        if getattr(args, name, 1) <= 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass an integer >= 1")
+    if not args.seeds:
+        raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
+    if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
+        raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
+    if args.learning_rate is not None and not args.learning_rate > 0:
+        raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}: e.g. 1e-4, or leave it out for the paper's default")
+
+
+# Copied from bc_oh.velocity_dims
+def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
+    """Indices of the joint velocities in the observation, where the paper adds its noise."""
+    obs_dim = env.observation_space.shape[0]
+    if override:
+        if min(override) < 0 or max(override) >= obs_dim:
+            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        return sorted(set(override))
+    structure = getattr(env.unwrapped, "observation_structure", None)
+    if structure:  # v5 envs describe their layout
+        start = structure["qpos"]  # positions come first, then the qvel block
+        return list(range(start, start + structure["qvel"]))
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # v4, NOTES.md
+    family = env_id.split("-")[0]
+    if family not in known:
+        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    return list(range(*known[family]))
+
+
+# Copied from bc_oh.VelocityNoise
+class VelocityNoise(gym.ObservationWrapper):
+    """Adds fresh N(0, std^2) noise to the velocity entries of every observation: a noisy sensor."""
+
+    def __init__(self, env: gym.Env, dims: list, std: float, seed: int):
+        super().__init__(env)
+        self.dims, self.std, self.rng = np.asarray(dims), std, np.random.default_rng(seed)
+
+    def observation(self, obs):
+        obs = np.array(obs, dtype=np.float64)
+        obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        return obs
+
+
+# Copied from bc_oh.make_env
+def make_env(env_id: str) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces."""
+    try:
+        env = gym.make(env_id)
+    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+    return env
+
+
+# ----------------------------------------------------------------------------------------------
+# Data: expert demonstrations, noise, history
+
+
+# Copied from expert_ppo.ExpertPolicy
+class ExpertPolicy(nn.Module):
+    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+
+    def __init__(self, checkpoint: dict):
+        super().__init__()
+        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
+        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net.load_state_dict(checkpoint["actor"])
+        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
+            self.register_buffer(name, checkpoint[name].float())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+
+
+# Copied from expert_ppo.load_expert
+def load_expert(path: str, env_id: str) -> ExpertPolicy:
+    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    if not os.path.isfile(path):
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+    if trained_on != env_id:
+        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+    return policy.eval()
+
+
+# Copied from bc_oh.generate_demos
+def generate_demos(env_id: str, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
+    env, obs_list, action_list, starts = gym.make(env_id), [], [], []
+    obs, _ = env.reset(seed=seed)
+    start = True
+    for _ in range(num_samples):
+        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        obs_list.append(obs), action_list.append(action), starts.append(start)
+        obs, _, terminated, truncated, _ = env.step(action)
+        start = terminated or truncated
+        if start:
+            obs, _ = env.reset()
+    env.close()
+    return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
+
+
+# Copied from bc_oh.write_atomically
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as file:
+        write(file)
+    os.replace(tmp, path)
+
+
+# Copied from bc_oh.load_or_generate_demos
+def load_or_generate_demos(args, env: gym.Env) -> dict:
+    """The demos of --demos, or the cached expert rollout, generating it on first use."""
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
+    path = args.demos or f"demos/{args.env}_{num_samples}.npz"
+    if args.demos is None and not os.path.isfile(path):
+        expert_path = args.expert.format(env=args.env)
+        if not os.path.isfile(expert_path):
+            raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
+        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+        demos = generate_demos(args.env, load_expert(expert_path, args.env), num_samples)
+        meta = json.dumps({"env_id": args.env, "source": expert_path, "num_samples": num_samples, "seed": 0})
+        write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if not os.path.isfile(path):
+        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
+    n = len(demos["actions"])
+    if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
+        raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
+    if n <= args.batch_size:
+        raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
+    demos["episode_starts"] = demos["episode_starts"].astype(bool)
+    demos["episode_starts"][0] = True
+    return demos
+
+
+# Copied from bc_oh.add_obs_noise
+def add_obs_noise(observations: np.ndarray, dims: list, std: float, seed: int) -> np.ndarray:
+    """Noise on the velocity entries, drawn once per demo sample, as a noisy sensor at collection time."""
+    noisy = observations.copy()
+    noisy[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(noisy), len(dims)))
+    return noisy
+
+
+# Copied from bc_oh.stack_history
+def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
+    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
+    index = np.arange(len(observations))
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
+    return np.concatenate(frames, axis=1)
+
+
+# Copied from bc_oh.HistoryStacker
+class HistoryStacker:
+    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
+
+    def __init__(self, history: int):
+        self.history, self.frames = history, None
+
+    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
+        if self.frames is None:
+            self.frames = np.repeat(obs[:, None], self.history, axis=1)
+        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
+        self.frames[episode_start] = obs[episode_start][:, None]
+        return self.frames.reshape(len(obs), -1)
+
+
+# ----------------------------------------------------------------------------------------------
+# Network
+
+
+# Copied from bc_oh.mlp
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP."""
+    return nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim))
+
+
+# Copied from bc_oh.Normalizer
+class Normalizer(nn.Module):
+    """Standardises inputs with statistics of the training demos, stored with the model."""
+
+    def __init__(self, inputs: torch.Tensor):
+        super().__init__()
+        self.register_buffer("mean", inputs.mean(0))
+        self.register_buffer("std", inputs.std(0).clamp_min(1e-6))
+
+    def forward(self, x):
+        return (x - self.mean) / self.std
+
+
+# Copied from bc_oh.Policy
+class Policy(nn.Module):
+    """BC-OH: the whole history, flattened, into one MLP."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.net = mlp(obs_dim * history, act_dim, hidden)
+
+    def forward(self, obs_history):
+        return self.net(self.normalize(obs_history))
+
+
+# Copied from bc_oh.make_policy
+def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
+    return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
+
+
+def previous_actions(actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int) -> np.ndarray:
+    """Row t = [a_{t-K*s}, ..., a_{t-2s}, a_{t-s}] (oldest first). Actions before the episode's first are
+    filled with that first action, the earliest available one (at the start itself, a_t)."""
+    frames = stack_history(actions, episode_starts, k * spacing + 1).reshape(len(actions), k * spacing + 1, -1)
+    return frames[:, 0 : k * spacing : spacing].reshape(len(actions), -1)
+
+
+def action_prediction_errors(actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int, epochs: int, batch_size: int, device) -> torch.Tensor:
+    """Train the action-prediction model (previous K actions -> a_t) on the demos, once; return its
+    squared error ||prediction - a_t||^2 on every sample, APE_t. Seeded by the caller's torch.manual_seed."""
+    inputs = torch.as_tensor(previous_actions(actions, episode_starts, k, spacing), dtype=torch.float32, device=device)
+    targets = torch.as_tensor(actions, dtype=torch.float32, device=device)
+    model = nn.Sequential(nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    for _ in range(epochs * max(1, len(inputs) // batch_size)):
+        idx = torch.randint(len(inputs), (batch_size,), device=device)
+        loss = ((model(inputs[idx]) - targets[idx]) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    with torch.no_grad():
+        return ((model(inputs) - targets) ** 2).sum(1)
+
+
+def keyframes(ape: torch.Tensor, fraction: float) -> torch.Tensor:
+    """The keyframes, as a mask: the round(fraction * N) samples of highest APE (at least one)."""
+    mask = torch.zeros_like(ape, dtype=torch.bool)
+    mask[torch.topk(ape, max(1, round(fraction * len(ape)))).indices] = True
+    return mask
+
+
+def keyframe_weights(ape: torch.Tensor, fraction: float, weight: float) -> torch.Tensor:
+    """Threshold weighting: `weight` on the keyframes, 1 on the other samples."""
+    return torch.where(keyframes(ape, fraction), weight, 1.0)
+
+
+def softmax_weights(ape: torch.Tensor, temperature: float) -> torch.Tensor:
+    """Softmax weighting of one batch: softmax(APE / T) over the batch, times its size (mean weight 1)."""
+    return torch.softmax(ape / temperature, dim=0) * len(ape)
+
+
+def changepoints(actions: np.ndarray, episode_starts: np.ndarray, fraction: float = 0.1) -> np.ndarray:
+    """Action changepoints: the top `fraction` (a decile) of samples by ||a_t - a_{t-1}|| (0 at an episode start)."""
+    jump = np.linalg.norm(actions - previous_actions(actions, episode_starts, 1, 1), axis=1)
+    mask = np.zeros(len(actions), bool)
+    mask[np.argsort(-jump, kind="stable")[: max(1, round(fraction * len(actions)))]] = True
+    return mask
+
+
+# ----------------------------------------------------------------------------------------------
+# Evaluation
+
+
+# Copied from bc_oh.evaluate
+@torch.no_grad()
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
+    """Returns of `episodes` parallel episodes of the deterministic policy on the noisy env."""
+    probe = gym.make(args.env)
+    dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
+    envs = gym.vector.SyncVectorEnv(
+        [lambda i=i: VelocityNoise(gym.make(args.env), dims, args.obs_noise_std, seed + i) for i in range(episodes)],
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    )
+    obs, _ = envs.reset(seed=seed)
+    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
+    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
+    while running.any():
+        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
+        action = policy(inputs).cpu().numpy().clip(low, high)
+        obs, reward, terminated, truncated, _ = envs.step(action)
+        returns += reward * running
+        running &= ~(terminated | truncated)  # each env plays exactly one episode
+        new_episode = terminated | truncated
+    envs.close()
+    return returns.tolist()
+
+
+# ----------------------------------------------------------------------------------------------
+# Training
+
+
+def train_seed(args, demos: dict, seed: int, device) -> dict:
+    """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
+    torch.manual_seed(seed)
+    env = make_env(args.env)
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    noisy = add_obs_noise(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, seed)
+    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
+    ape = action_prediction_errors(demos["actions"], demos["episode_starts"], args.keyframe_k, args.keyframe_spacing, args.keyframe_model_epochs, args.batch_size, device)
+    weights = keyframe_weights(ape, args.keyframe_fraction, args.keyframe_weight)
+    is_key, at_change = keyframes(ape, args.keyframe_fraction).cpu().numpy(), changepoints(demos["actions"], demos["episode_starts"])
+    print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
+          f"{(is_key & at_change).sum()} of them at action changepoints (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)")
+    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
+    steps_per_epoch = len(inputs) // args.batch_size
+    total_steps, step, evaluations, start = args.epochs * steps_per_epoch, 0, [], time.time()
+    generator = torch.Generator(device=device).manual_seed(seed)
+
+    for epoch in range(1, args.epochs + 1):
+        for _ in range(steps_per_epoch):
+            optimizer.param_groups[0]["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
+            idx = torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator)
+            error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)
+            loss = ((weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)) * error).mean()
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            step += 1
+        if epoch % args.eval_every == 0 or epoch == args.epochs:
+            policy.eval()
+            evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
+            policy.train()
+        if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
+            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
+            print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {loss.item():.5f} | last eval {last} | ETA {eta:.1f} min", flush=True)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim}
+
+
+# Copied from bc_oh.run
+def run(args):
+    """Check the input, get the demos, train every seed, report and write the JSON result."""
+    check_common_args(args)
+    env = make_env(args.env)
+    velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
+    if args.learning_rate is None:
+        args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
+    device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
+    demos = load_or_generate_demos(args, env)
+    output_dir = args.output_dir.format(method=METHOD, env=args.env)
+    scores, per_seed = [], {}
+    for seed in args.seeds:
+        result = train_seed(args, demos, seed, device)
+        score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
+        scores.append(score)
+        per_seed[seed] = {"score": score, "evaluations": result["evaluations"]}
+        if args.save_model:
+            checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
+                          "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
+            write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
+    result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
+    summary = {"env": args.env, "method": METHOD, "args": asdict(args), "scores": per_seed,
+               "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+    write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
+    print(f"\n{'seed':>6} | {'score':>8}")
+    for seed, score in zip(args.seeds, scores):
+        print(f"{seed:>6} | {score:8.1f}")
+    print(f"result: {result_path}")
+    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seeds")
+
+
+if __name__ == "__main__":
+    try:
+        run(tyro.cli(Args))
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)

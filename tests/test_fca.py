@@ -1,0 +1,113 @@
+"""fca.py: the adversary is conditioned on a_t, the alternating updates push its loss in opposite
+directions, previous actions follow the episode structure, bad input, and a smoke run."""
+import numpy as np
+import pytest
+import torch
+
+import fca
+from conftest import assert_usage_error, run_in_process, smoke_run
+
+OBS, ACT, HISTORY, EMBEDDING = 11, 3, 2, 8
+
+
+def small_policy(seed=0):
+    torch.manual_seed(seed)
+    return fca.Policy(OBS, ACT, HISTORY, hidden=16, embedding_dim=EMBEDDING, inputs=torch.randn(100, OBS * HISTORY))
+
+
+def batch(seed=0, n=64):
+    generator = torch.Generator().manual_seed(seed)
+    return [torch.randn(n, dim, generator=generator) for dim in (OBS * HISTORY, ACT, ACT)]  # history, a_t, a_{t-1}
+
+
+def optimizers(policy, lr=1e-3):
+    """As train_seed builds them: G and F together, D apart, both Adam with betas (0.5, 0.999)."""
+    policy_optimizer = torch.optim.Adam([*policy.encoder.parameters(), *policy.head.parameters()], lr=lr, betas=(0.5, 0.999))
+    return policy_optimizer, torch.optim.Adam(policy.adversary.parameters(), lr=lr, betas=(0.5, 0.999))
+
+
+def adversary_loss(policy, history, action, previous):
+    with torch.no_grad():
+        return ((policy.predict_previous_action(policy.embed(history), action) - previous) ** 2).mean().item()
+
+
+def snapshot(module):
+    return [p.detach().clone() for p in module.parameters()]
+
+
+def unchanged(module, before):
+    return all(torch.equal(p, q) for p, q in zip(module.parameters(), before))
+
+
+def test_adversary_input_is_the_embedding_and_the_true_current_action():
+    policy = small_policy()
+    assert policy.adversary[1].in_features == EMBEDDING + ACT
+    embedding, action = torch.randn(5, EMBEDDING), torch.randn(5, ACT)
+    prediction = policy.predict_previous_action(embedding, action)
+    assert prediction.shape == (5, ACT)
+    assert torch.equal(prediction, policy.adversary(torch.cat([embedding, action], dim=1)))
+    assert not torch.allclose(policy.predict_previous_action(embedding, action + 1.0), prediction), "a_t must reach D"
+    assert not torch.allclose(policy.predict_previous_action(embedding + 1.0, action), prediction), "e must reach D"
+
+
+def test_policy_acts_through_encoder_and_head_only():
+    policy = small_policy()
+    history = batch()[0]
+    assert torch.equal(policy(history), policy.head(policy.encoder(policy.normalize(history))))
+    assert policy(history).shape == (64, ACT)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_encoder_step_raises_the_adversary_loss_and_adversary_step_lowers_it(seed):
+    """w = 2 (the authors' Hopper value): at w = 1 the BC part of the gradient outweighs the adversarial
+    part for about 1 random initialisation in 40; at w = 2 for none of 100 we tried."""
+    policy = small_policy(seed)
+    history, action, previous = batch(seed)
+    policy_optimizer, adversary_optimizer = optimizers(policy)
+    before = adversary_loss(policy, history, action, previous)
+
+    adversary_weights = snapshot(policy.adversary)
+    bc, adversary = fca.encoder_policy_step(policy, policy_optimizer, history, action, previous, weight=2.0)
+    assert adversary.item() == pytest.approx(before), "the returned adversary loss is the one before the step"
+    assert unchanged(policy.adversary, adversary_weights), "the encoder+policy step must not move D"
+    after_encoder = adversary_loss(policy, history, action, previous)
+    assert after_encoder > before
+
+    encoder_weights, head_weights = snapshot(policy.encoder), snapshot(policy.head)
+    returned = fca.adversary_step(policy, adversary_optimizer, history, action, previous)
+    assert returned.item() == pytest.approx(after_encoder)
+    assert unchanged(policy.encoder, encoder_weights) and unchanged(policy.head, head_weights), "the D step must move D only"
+    assert adversary_loss(policy, history, action, previous) < after_encoder
+
+
+def test_adversary_weight_zero_is_plain_bc_on_the_fca_network():
+    """With w = 0 the encoder+policy step is one BC step: it lowers the BC loss on the batch."""
+    policy = small_policy()
+    history, action, previous = batch()
+    policy_optimizer, _ = optimizers(policy)
+    bc_before, _ = fca.encoder_policy_step(policy, policy_optimizer, history, action, previous, weight=0.0)
+    with torch.no_grad():
+        assert ((policy(history) - action) ** 2).mean() < bc_before
+
+
+def test_previous_action_at_an_episode_start_is_the_current_action():
+    actions = np.arange(12, dtype=np.float32).reshape(6, 2)  # a_t = (2t, 2t + 1)
+    starts = np.array([True, False, False, True, False, False])
+    previous = fca.previous_actions(actions, starts)
+    assert previous[:, 0].tolist() == [0, 0, 2, 6, 6, 8]  # 2 * [0, 0, 1, 3, 3, 4]
+    assert np.array_equal(previous[starts], actions[starts])
+    assert np.array_equal(previous[~starts], actions[np.flatnonzero(~starts) - 1])
+
+
+@pytest.mark.parametrize("flag, value, message", [("--adversary-weight", -1, "must be >= 0"), ("--adversary-lr", 0, "must be positive"),
+                                                   ("--encoder-hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive")])
+def test_bad_method_parameters_are_rejected(flag, value, message):
+    assert_usage_error(run_in_process("fca.py", flag, value), f"{flag} {message}")
+
+
+def test_smoke_run_logs_the_adversary_error(tmp_path):
+    stdout, summary = smoke_run("fca.py", tmp_path)
+    progress = [line for line in stdout.splitlines() if "| epoch " in line]
+    assert len(progress) == 2 and all("| adversary error " in line for line in progress)
+    assert "adversary reference: predicting a_(t-1) = a_t has error" in stdout
+    assert summary["args"]["adversary_weight"] == 1.0 and summary["args"]["adversary_lr"] == 2e-4
