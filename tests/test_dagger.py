@@ -10,7 +10,7 @@ import torch
 
 import bc_oh
 import dagger
-from conftest import REPO_ROOT, SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_script, tiny_args
+from conftest import REPO_ROOT, SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script, tiny_args
 
 EXPERT = str(REPO_ROOT / "experts" / "{env}.pt")
 HOPPER_VELOCITIES, HOPPER_POSITIONS, OBS_DIM = list(range(5, 11)), list(range(0, 5)), 11
@@ -92,7 +92,7 @@ def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, expert)
 
 
 def test_bad_dagger_settings_are_rejected(tmp_path):
-    assert_usage_error(run_script("dagger.py", "--dagger-samples", 3, "--dagger-rounds", 4, cwd=tmp_path),
+    assert_usage_error(run_in_process("dagger.py", "--dagger-samples", 3, "--dagger-rounds", 4),
                        "--dagger-samples 3 is below one label per round of --dagger-rounds 4")
     for overrides, message in ((dict(dagger_epochs=0), "--dagger-epochs must be positive"),
                                (dict(dagger_rounds=0), "--dagger-rounds must be positive"),
