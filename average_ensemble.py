@@ -164,11 +164,11 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
         raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy = ExpertPolicy(checkpoint)
+        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
         raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
-    if checkpoint["env_id"] != env_id:
-        raise UsageError(f"{path} is an expert for {checkpoint['env_id']}, not {env_id}: pass the checkpoint made for {env_id}")
+    if trained_on != env_id:
+        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
     return policy.eval()
 
 
