@@ -1,0 +1,200 @@
+"""Turn the per-run results of benchmark.run_grid into the Table 2 files, ours beside the paper's.
+
+    python -m benchmark.aggregate [--results-dir results/runs] [--out results] [--allow-nonpaper]
+
+Reads every <results-dir>/<method>/<env>/result_seeds*.json and writes
+- <out>/mujoco.csv: env,method,seed,score, score = mean return of the seed's last three evaluations;
+- <out>/table2.md: mean ± std over seeds per method and env, the paper's number beside it, seeds per cell;
+- <out>/table2.png: the same as bars with error bars, paper beside ours, one panel per env.
+Corrupt or partial results, and runs at settings other than the paper's (unless --allow-nonpaper), are
+reported on stderr, naming the file, and left out.
+"""
+import statistics
+import sys
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from benchmark.paper import METHOD_NAMES, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, setting_differences
+from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
+
+
+@dataclass
+class Record:
+    """One seed of one run."""
+    method: str
+    env: str
+    seed: int
+    score: float
+    path: Path
+    episode_std: float = None
+    """the expert only: std of its evaluation over episodes"""
+    episodes: int = None
+    """the expert only: episodes of its evaluation"""
+    differences: list = field(default_factory=list)
+    """how its settings differ from the paper's (empty at the paper's settings)"""
+
+
+@dataclass
+class Cell:
+    mean: float
+    std: float
+    count: str
+    """'n=3' (seeds), or for the expert '20 ep.' (episodes of its one evaluation)"""
+
+
+def collect(results_dir: Path, allow_nonpaper: bool):
+    """The valid records under results_dir, and one line per file left out and why."""
+    records, problems = {}, []
+    for path in sorted(results_dir.glob("*/*/result_seeds*.json")):
+        method, env = path.parent.parent.name, path.parent.name
+        try:
+            result = read_result(path, method, env)
+        except ResultError as error:
+            problems.append(f"left out {path}: {error}")
+            continue
+        differences = [] if method == EXPERT else setting_differences(result["args"], paper_settings(env), env)
+        if differences and not allow_nonpaper:
+            problems.append(f"left out {path}: not the paper's settings ({', '.join(differences)}); --allow-nonpaper includes it")
+            continue
+        for seed, entry in result["scores"].items():
+            record = Record(method, env, int(seed), seed_score(entry["evaluations"]), path, differences=differences)
+            if method == EXPERT:
+                record.episode_std, record.episodes = result["std"], result["args"].get("eval_episodes")
+            key = (method, env, record.seed)
+            if key in records:  # the same seed in two files (e.g. result_seeds1.json and result_seeds1-2-3.json)
+                older, record = sorted([records[key], record], key=lambda r: r.path.stat().st_mtime)
+                problems.append(f"left out seed {record.seed} of {older.path}: {record.path} is newer and holds it too")
+            records[key] = record
+    return list(records.values()), problems
+
+
+def ordered(names, order) -> list:
+    """names in the paper's order first, then the others alphabetically."""
+    return sorted(set(names), key=lambda name: (order.index(name) if name in order else len(order), name))
+
+
+def summarise(records: list) -> Cell:
+    scores = [record.score for record in records]
+    if records[0].method == EXPERT:  # one deterministic evaluation: its spread is over episodes
+        return Cell(statistics.fmean(scores), statistics.fmean(r.episode_std for r in records), f"{records[0].episodes} ep.")
+    return Cell(statistics.fmean(scores), statistics.pstdev(scores), f"n={len(scores)}")
+
+
+def build_table(records: list):
+    """(methods, envs, ours[(method, env)] -> Cell): rows = the paper's methods and any others we ran."""
+    envs = ordered([r.env for r in records], [f"{family}-v4" for family in PAPER_ENV_ORDER])
+    methods = ordered(list(METHOD_NAMES) + [r.method for r in records], list(METHOD_NAMES))
+    ours = {}
+    for method in methods:
+        for env in envs:
+            cell_records = [r for r in records if r.method == method and r.env == env]
+            if cell_records:
+                ours[method, env] = summarise(cell_records)
+    return methods, envs, ours
+
+
+def paper_cell(method: str, env: str):
+    return PAPER_TABLE2.get(method, {}).get(env_family(env))
+
+
+def format_cell(mean, std) -> str:
+    return f"{mean:.0f}" if std is None else f"{mean:.0f} ± {std:.0f}"
+
+
+def settings_text() -> str:
+    hopper, other = paper_settings("Hopper-v4"), paper_settings("Ant-v4")
+    return ", ".join(f"{name} {hopper[name]}" if hopper[name] == other[name] else f"{name} {hopper[name]} Hopper / {other[name]} otherwise"
+                     for name in hopper)
+
+
+def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool) -> str:
+    methods, envs, ours = build_table(records)
+    lines = [
+        "# Table 2: imitation on MuJoCo with noisy velocities, ours beside the paper's",
+        "",
+        f"Made by `python -m benchmark.aggregate --results-dir {results_dir} --out {out}"
+        + (" --allow-nonpaper" if allow_nonpaper else "") + f"` from {len(records)} per-seed results, made by "
+        "`python -m benchmark.run_grid` (the log beside each result starts with the command that made it).",
+        "",
+        "Ours: mean ± std over seeds (population std), n = seeds in the cell; a seed's score is the mean return of "
+        "its last three evaluations, as the paper reports. Paper: its Table 2 (three seeds; /work/shared/NOTES.md "
+        "section 1). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
+        "evaluation episodes (ep.), on the clean env; the paper gives no std for it.",
+        "",
+        f"Settings (the paper's): {settings_text()}.",
+        "",
+    ]
+    nonpaper = Counter(", ".join(r.differences) for r in records if r.differences)
+    if nonpaper:
+        lines += ["**Not at the paper's settings** (included by --allow-nonpaper): "
+                  + "; ".join(f"{count} seed runs with {difference}" for difference, count in nonpaper.items()) + ".", ""]
+    lines += ["| method | " + " | ".join(f"{env} ours | {env_family(env)} paper" for env in envs) + " |",
+              "|---|" + "---:|---:|" * len(envs)]
+    for method in methods:
+        cells = []
+        for env in envs:
+            cell, paper = ours.get((method, env)), paper_cell(method, env)
+            cells.append(f"{format_cell(cell.mean, cell.std)} ({cell.count})" if cell else "—")
+            cells.append(format_cell(*paper) if paper else "—")
+        lines.append(f"| {METHOD_NAMES.get(method, method)} (`{method}`) | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(records: list, path: Path):
+    """One panel per env: for each method a bar of ours and one of the paper's, std as error bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods, envs, ours = build_table(records)
+    figure, axes = plt.subplots(1, len(envs), figsize=(4.8 * len(envs), 4.6), squeeze=False)
+    for axis, env in zip(axes[0], envs):
+        shown = [m for m in methods if (m, env) in ours or paper_cell(m, env)]
+        for offset, label, color, value in (
+            (-0.2, "ours", "tab:blue", lambda m: (ours[m, env].mean, ours[m, env].std) if (m, env) in ours else None),
+            (0.2, "paper", "0.75", lambda m: paper_cell(m, env)),
+        ):
+            bars = [(i, *value(m)) for i, m in enumerate(shown) if value(m)]
+            if bars:
+                x, means, stds = zip(*bars)
+                axis.bar([i + offset for i in x], means, 0.4, yerr=[s or 0 for s in stds], capsize=3, color=color, label=label)
+        axis.set_xticks(range(len(shown)), [METHOD_NAMES.get(m, m) for m in shown], rotation=45, ha="right")
+        axis.set_title(env)
+        axis.set_ylabel("return")
+    axes[0][0].legend()
+    figure.suptitle("Table 2: ours (mean ± std over seeds) beside the paper's")
+    figure.tight_layout()
+    with written_atomically(path) as tmp:
+        figure.savefig(tmp, dpi=120)
+    plt.close(figure)
+
+
+def main(argv=None) -> int:
+    parser = OneLineParser(prog="python -m benchmark.aggregate", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--results-dir", type=Path, default=Path("results/runs"), help="where benchmark.run_grid wrote the runs")
+    parser.add_argument("--out", type=Path, default=Path("results"), help="where mujoco.csv, table2.md and table2.png go")
+    parser.add_argument("--allow-nonpaper", action="store_true", help="include runs at settings other than the paper's")
+    args = parser.parse_args(argv)
+    if not args.results_dir.is_dir():
+        raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.run_grid first, or pass --results-dir")
+    records, problems = collect(args.results_dir, args.allow_nonpaper)
+    for problem in problems:
+        print(problem, file=sys.stderr)
+    if not records:
+        raise UsageError(f"no valid results to aggregate under {args.results_dir} (see above): run python -m benchmark.run_grid")
+    methods, envs, _ = build_table(records)
+    rows = sorted(records, key=lambda r: (envs.index(r.env), methods.index(r.method), r.seed))
+    write_text(args.out / "mujoco.csv", "env,method,seed,score\n" + "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in rows))
+    table = markdown(records, args.results_dir, args.out, args.allow_nonpaper)
+    write_text(args.out / "table2.md", table)
+    plot(records, args.out / "table2.png")
+    print(table)
+    print(f"wrote {args.out / 'mujoco.csv'} ({len(rows)} rows), {args.out / 'table2.md'}, {args.out / 'table2.png'}"
+          + (f"; left out {len(problems)} (listed above)" if problems else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)

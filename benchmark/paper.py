@@ -1,0 +1,78 @@
+"""The paper's Table 2 and its MuJoCo settings (paper sections 5.1 and 8.3; /work/shared/NOTES.md section 1).
+
+Everything the benchmark knows about the paper lives here, in one place.
+"""
+import math
+
+# Table 2: mean and std over 3 seeds of the last three evaluations; the expert has no std.
+PAPER_TABLE2 = {
+    "bc_so": {"Hopper": (589, 94), "Ant": (4198, 433), "HalfCheetah": (489, 77)},
+    "bc_oh": {"Hopper": (628, 99), "Ant": (2922, 1266), "HalfCheetah": (639, 121)},
+    "c2f": {"Hopper": (1124, 135), "Ant": (4798, 304), "HalfCheetah": (1448, 74)},
+    "fca": {"Hopper": (831, 108), "Ant": (3727, 926), "HalfCheetah": (1148, 81)},
+    "keyframe": {"Hopper": (696, 28), "Ant": (2930, 1321), "HalfCheetah": (1062, 127)},
+    "history_dropout": {"Hopper": (539, 33), "Ant": (4069, 517), "HalfCheetah": (1215, 70)},
+    "average_ensemble": {"Hopper": (504, 47), "Ant": (4659, 396), "HalfCheetah": (729, 50)},
+    "dagger": {"Hopper": (2383, 294), "Ant": (4097, 418), "HalfCheetah": (1842, 10)},
+    "expert": {"Hopper": (3445, None), "Ant": (5566, None), "HalfCheetah": (1941, None)},
+}
+"""method (file name without .py, or "expert") -> env family -> (mean, std or None)"""
+
+METHOD_NAMES = {
+    "bc_so": "BC-SO", "bc_oh": "BC-OH", "c2f": "Coarse-to-fine", "fca": "FCA", "keyframe": "KeyFrame",
+    "history_dropout": "History-Dropout", "average_ensemble": "Average-Ensemble", "dagger": "DAgger 8K",
+    "expert": "PPO expert",
+}
+"""the paper's row names, in the paper's row order"""
+
+PAPER_ENV_ORDER = ["Hopper", "Ant", "HalfCheetah"]
+"""the paper's column order (env families); Walker2d was collected but never reported"""
+
+
+def env_family(env_id: str) -> str:
+    """"Hopper-v4" -> "Hopper": the paper names envs without a version."""
+    return env_id.split("-")[0]
+
+
+def paper_settings(env_id: str) -> dict:
+    """The settings of every Table 2 run, as Args fields of the method scripts."""
+    hopper = env_family(env_id) == "Hopper"
+    return {
+        "epochs": 1000,
+        "batch_size": 64,
+        "obs_noise_std": 0.2,
+        "history": 2,
+        "learning_rate": 1e-5 if hopper else 1e-4,
+        "num_demo_samples": 20000 if hopper else 10000,
+    }
+
+
+DEFAULTED = ("learning_rate", "num_demo_samples")
+"""fields for which the scripts take None to mean the paper's per-env default"""
+
+
+def setting_differences(args: dict, wanted: dict, env_id: str) -> list:
+    """Readable 'name got != wanted' for every field of `wanted` on which a run's args differ.
+
+    None in the run's args stands for the script's default (the paper's value) for DEFAULTED fields.
+    """
+    defaults = paper_settings(env_id)
+    differences = []
+    for name, want in wanted.items():
+        got = args.get(name)
+        if got is None and name in DEFAULTED:
+            got = defaults[name]
+        if not same_value(got, want):
+            differences.append(f"{name} {got} != {want}")
+    return differences
+
+
+def same_value(a, b) -> bool:
+    """Equality with a relative tolerance for numbers (1e-5 written as 1e-05 or 0.00001 alike)."""
+    if isinstance(a, bool) or isinstance(b, bool) or a is None or b is None:
+        return a == b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same_value(x, y) for x, y in zip(a, b))
+    return a == b

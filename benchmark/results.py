@@ -1,0 +1,119 @@
+"""Per-run JSON results: their paths, and the checks that tell a valid result from a corrupt or partial one.
+
+A result is the JSON a method script writes (bc_oh.py's run()), `{output_dir}/result_seeds{S}.json`:
+    {"env": ..., "method": ..., "args": {...}, "scores": {"<seed>": {"score": s, "evaluations": [[epoch, return], ...]}},
+     "mean": ..., "std": ...}
+and, for the expert (benchmark/run_grid.py writes it), the same shape with one evaluation per seed.
+"""
+import argparse
+import contextlib
+import json
+import math
+import os
+import statistics
+import sys
+from pathlib import Path
+
+EXPERT = "expert"
+"""the method name of the PPO expert's own evaluation (expert_ppo.py --eval-only)"""
+
+
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+class ResultError(Exception):
+    """A result file that cannot be counted: unreadable, partial, or not the run it claims to be."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose errors are UsageErrors: one line on stderr and exit 2, like every other bad input."""
+
+    def error(self, message):
+        raise UsageError(f"{message}: see {self.prog} --help")
+
+
+def run_cli(main):
+    """Call main(); turn a UsageError into one line on stderr and exit status 2."""
+    try:
+        sys.exit(main())
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+
+
+def result_path(results_dir, method: str, env: str, seeds) -> Path:
+    """Where a method script given --output-dir results_dir/method/env --seeds *seeds writes its result."""
+    return Path(results_dir) / method / env / f"result_seeds{'-'.join(map(str, seeds))}.json"
+
+
+def seed_score(evaluations: list) -> float:
+    """The paper's score of one seed: the mean return of its last three evaluations."""
+    last = [ret for _, ret in evaluations[-3:]]
+    return sum(last) / len(last)
+
+
+def make_result(env: str, method: str, args: dict, evaluations: dict) -> dict:
+    """A result in the scripts' JSON shape from {seed: [[epoch, return], ...]}."""
+    scores = {str(seed): {"score": seed_score(runs), "evaluations": runs} for seed, runs in evaluations.items()}
+    values = [entry["score"] for entry in scores.values()]
+    return {"env": env, "method": method, "args": args, "scores": scores, "mean": statistics.fmean(values), "std": statistics.pstdev(values)}
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def read_result(path, method: str, env: str, seeds=None) -> dict:
+    """Load and check a result; raises ResultError(why) unless it is complete and is the run of
+    `method` on `env` for exactly `seeds` (by default the seeds its file name says)."""
+    path = Path(path)
+    if seeds is None:
+        try:
+            seeds = [int(s) for s in path.stem.removeprefix("result_seeds").split("-")]
+        except ValueError:
+            raise ResultError("file name is not result_seeds<S>[-<S>...].json")
+    try:
+        result = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ResultError(f"unreadable JSON ({type(error).__name__}: {error})")
+    if not isinstance(result, dict):
+        raise ResultError("not a JSON object")
+    missing = [key for key in ("env", "method", "args", "scores", "mean", "std") if key not in result]
+    if missing:
+        raise ResultError(f"missing keys {', '.join(missing)}")
+    if result["method"] != method or result["env"] != env:
+        raise ResultError(f"holds {result['method']} on {result['env']}, expected {method} on {env}")
+    scores = result["scores"]
+    if not isinstance(scores, dict) or sorted(scores) != sorted(map(str, seeds)):
+        got = sorted(scores) if isinstance(scores, dict) else type(scores).__name__
+        raise ResultError(f"holds seeds {got}, expected {list(seeds)}")
+    if not isinstance(result["args"], dict):
+        raise ResultError("args is not a JSON object")
+    for seed, entry in scores.items():
+        evaluations = entry.get("evaluations") if isinstance(entry, dict) else None
+        if not evaluations or not all(isinstance(e, list) and len(e) == 2 and all(map(_finite, e)) for e in evaluations):
+            raise ResultError(f"seed {seed} has no valid evaluations (a list of [epoch, return] pairs)")
+        if not _finite(entry.get("score")) or not math.isclose(entry["score"], seed_score(evaluations), rel_tol=1e-6, abs_tol=1e-6):
+            raise ResultError(f"seed {seed}: score {entry.get('score')} is not the mean of its last three evaluations")
+    if not _finite(result["mean"]) or not _finite(result["std"]):
+        raise ResultError("mean or std is not a number")
+    return result
+
+
+@contextlib.contextmanager
+def written_atomically(path):
+    """Yield a temporary path to write to; on success rename it to `path` (no half-written files)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.tmp{os.getpid()}{path.suffix}")  # keep the suffix for savefig
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text(path, text: str):
+    with written_atomically(path) as tmp:
+        tmp.write_text(text)

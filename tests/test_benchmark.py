@@ -1,0 +1,285 @@
+"""benchmark/: the grid runner (skip, re-run, failures, expert, SLURM, bad input) and the aggregator (numbers,
+refusals), with a stand-in method script that writes its result instantly: no real training here."""
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import time
+
+import pytest
+from conftest import REPO_ROOT, assert_usage_error
+
+from benchmark import aggregate, run_grid
+from benchmark.paper import paper_settings
+from benchmark.results import ResultError, make_result, read_result, result_path
+
+FAKE_METHOD = f'''
+"""Stand-in method: writes a result at once. FAKE_CRASH_SEED crashes that seed, FAKE_SILENT_SEED exits 0 without a result,
+FAKE_SLEEP waits that long first (its pid in pid<seed>)."""
+import argparse, json, os, sys, time
+sys.path.insert(0, {str(REPO_ROOT)!r})
+from benchmark.results import make_result, write_text
+METHOD = "fake"
+parser = argparse.ArgumentParser()
+for name in ("--env", "--output-dir"):
+    parser.add_argument(name)
+parser.add_argument("--seeds", type=int, nargs="+")
+parser.add_argument("--epochs", type=int, default=1000)
+args = parser.parse_args()
+seed = args.seeds[0]
+with open("calls.txt", "a") as calls:
+    calls.write(f"{{args.env}} {{seed}}\\n")
+if os.environ.get("FAKE_SLEEP"):
+    with open(f"pid{{seed}}", "w") as file:
+        file.write(str(os.getpid()))
+    time.sleep(float(os.environ["FAKE_SLEEP"]))
+if str(seed) == os.environ.get("FAKE_CRASH_SEED"):
+    raise RuntimeError("boom")
+if str(seed) != os.environ.get("FAKE_SILENT_SEED"):
+    settings = dict(epochs=args.epochs, batch_size=64, obs_noise_std=0.2, history=2, learning_rate=None, num_demo_samples=None)
+    result = make_result(args.env, METHOD, dict(env=args.env, seeds=[seed], **settings), {{seed: [[1, 0.0], [2, 10.0 * seed], [3, 10.0 * seed], [4, 10.0 * seed]]}})
+    write_text(f"{{args.output_dir}}/result_seeds{{seed}}.json", json.dumps(result))
+'''
+
+FAKE_EXPERT = '''
+import sys
+import time
+env = sys.argv[sys.argv.index("--env") + 1]
+returns = [3000.0, 3100.0, 2900.0, 3200.0]
+for i, value in enumerate(returns):
+    print(f"episode {i}: return {value:.1f}")
+print(f"{env} expert: 3050.0 ± 111.8 over {len(returns)} episodes")
+'''
+
+
+@pytest.fixture
+def scripts(tmp_path):
+    """A scripts folder with the stand-in method `fake`, a stand-in expert_ppo.py, and expert files."""
+    folder = tmp_path / "scripts"
+    (folder / "experts").mkdir(parents=True)
+    (folder / "fake.py").write_text(FAKE_METHOD)
+    (folder / "expert_ppo.py").write_text(FAKE_EXPERT)
+    for env in ("Hopper-v4", "Ant-v4"):
+        (folder / "experts" / f"{env}.pt").write_bytes(b"")
+    return folder
+
+
+def grid(scripts, results, *args):
+    """run_grid.main in this process on the stand-in scripts; returns its exit status."""
+    return run_grid.main(["--scripts-dir", str(scripts), "--results-dir", str(results), *map(str, args)])
+
+
+def calls(scripts) -> list:
+    path = scripts / "calls.txt"
+    return sorted(path.read_text().splitlines()) if path.exists() else []
+
+
+def plant(results, method, env, seed, returns, **settings):
+    """Write a valid result of `method` on `env` for `seed` whose evaluations return `returns`."""
+    args = {"env": env, "seeds": [seed], **paper_settings(env), "learning_rate": None, **settings}
+    result = make_result(env, method, args, {seed: [[epoch, value] for epoch, value in enumerate(returns, 1)]})
+    path = result_path(results, method, env, [seed])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result))
+    return path
+
+
+# ----------------------------------------------------------------------------------------------
+# The runner
+
+
+def test_runner_skips_finished_runs_and_reruns_corrupt_or_stale_ones(scripts, tmp_path, capsys):
+    results = tmp_path / "runs"
+    finished = plant(results, "fake", "Hopper-v4", 1, [5.0, 5.0, 5.0])
+    result_path(results, "fake", "Hopper-v4", [2]).write_text('{"env": "Hopper-v4", "method": "fa')  # cut short
+    plant(results, "fake", "Hopper-v4", 3, [1.0, 2.0, 3.0], epochs=2)  # other settings than asked for
+    json_of_seed_1 = finished.read_text()
+    wrong_seed = plant(results, "fake", "Hopper-v4", 5, [1.0])
+    os.replace(wrong_seed, result_path(results, "fake", "Hopper-v4", [4]))  # claims seed 4, holds seed 5
+
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, 3, 4, "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "skip fake Hopper-v4 seed 1" in out and "grid: 4 combinations, 1 done, 3 to run" in out
+    assert calls(scripts) == []  # a dry run runs nothing
+
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, 3, 4, "--workers", 2) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"re-run fake Hopper-v4 seed 2: corrupt result .*result_seeds2.json: unreadable JSON", out)
+    assert re.search(r"re-run fake Hopper-v4 seed 3: .* was made with other settings \(epochs 2 != 1000\)", out)
+    assert re.search(r"re-run fake Hopper-v4 seed 4: corrupt result .*holds seeds \['5'\], expected \[4\]", out)
+    assert calls(scripts) == ["Hopper-v4 2", "Hopper-v4 3", "Hopper-v4 4"]
+    assert finished.read_text() == json_of_seed_1  # the finished run was left alone
+    for seed in (2, 3, 4):
+        assert read_result(result_path(results, "fake", "Hopper-v4", [seed]), "fake", "Hopper-v4", [seed])["mean"] == 10.0 * seed
+    assert (results / "fake" / "Hopper-v4" / "seed2.log").read_text().startswith("$ python fake.py --env Hopper-v4 --seeds 2")
+
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, 3, 4) == 0  # all done now
+    assert "4 combinations, 4 done, 0 to run" in capsys.readouterr().out and len(calls(scripts)) == 3
+    # results made with --extra-args settings count as done for the same --extra-args, and only for them
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 7, "--extra-args", "--epochs 2") == 0
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 7, "--extra-args", "--epochs=2 --cuda", "--dry-run") == 0
+    assert "1 done, 0 to run" in capsys.readouterr().out
+    grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 7, "--dry-run")
+    assert "epochs 2 != 1000" in capsys.readouterr().out
+
+
+def test_a_crashing_worker_is_listed_and_the_rest_go_on(scripts, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("FAKE_CRASH_SEED", "2")
+    monkeypatch.setenv("FAKE_SILENT_SEED", "3")
+    results = tmp_path / "runs"
+    status = grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1, 2, 3, 4, "--workers", 2)
+    out = capsys.readouterr().out
+    assert status == 1
+    assert len(calls(scripts)) == 8  # every combination ran
+    failed = out.split("runs failed:")[1]
+    assert "4 of 8 runs failed" in out
+    for env in ("Hopper-v4", "Ant-v4"):
+        assert re.search(rf"fake {env} seed 2: exit 1: RuntimeError: boom \(log: .*seed2.log\)", failed)
+        assert re.search(rf"fake {env} seed 3: exited 0 but left no valid result: no result yet", failed)
+        for seed in (1, 4):
+            assert read_result(result_path(results, "fake", env, [seed]), "fake", env, [seed])["mean"] == 10.0 * seed
+    assert "seed 1" not in failed and "seed 4" not in failed
+
+
+def test_a_killed_grid_stops_its_runs_and_starts_no_more(scripts, tmp_path):
+    command = [sys.executable, "-m", "benchmark.run_grid", "--scripts-dir", str(scripts), "--results-dir", str(tmp_path / "runs"),
+               "--methods", "fake", "--envs", "Hopper-v4", "--seeds", "1", "2", "3", "--workers", "2"]
+    grid_process = subprocess.Popen(command, cwd=REPO_ROOT, env=dict(os.environ, FAKE_SLEEP="60"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 30
+    while not all((scripts / f"pid{seed}").exists() and (scripts / f"pid{seed}").read_text() for seed in (1, 2)):
+        assert time.time() < deadline and grid_process.poll() is None, "the two first runs did not start"
+        time.sleep(0.1)
+    grid_process.terminate()
+    _, err = grid_process.communicate(timeout=20)
+    assert grid_process.returncode == 130 and "interrupted: finished results are kept" in err
+    for seed in (1, 2):
+        with pytest.raises(ProcessLookupError):  # the runs were stopped (and reaped) with the grid
+            os.kill(int((scripts / f"pid{seed}").read_text()), 0)
+    assert calls(scripts) == ["Hopper-v4 1", "Hopper-v4 2"]  # seed 3 never started
+
+
+def test_expert_is_evaluated_once_per_env_into_the_same_json_shape(scripts, tmp_path, capsys):
+    results = tmp_path / "runs"
+    assert grid(scripts, results, "--methods", "expert", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, "--expert-episodes", 4) == 0
+    assert "3 combinations" in capsys.readouterr().out  # expert once, fake twice
+    path = result_path(results, "expert", "Hopper-v4", [0])
+    result = read_result(path, "expert", "Hopper-v4")
+    assert result["scores"]["0"]["score"] == pytest.approx(3050.0)
+    assert result["std"] == pytest.approx(statistics.pstdev([3000, 3100, 2900, 3200]))
+    assert result["args"]["eval_episodes"] == 4
+    assert grid(scripts, results, "--methods", "expert", "--envs", "Hopper-v4", "--expert-episodes", 5, "--dry-run") == 0
+    assert "eval_episodes 4 != 5" in capsys.readouterr().out  # another episode count is another run
+
+
+def test_slurm_script_names_every_combination_exactly_once(scripts, tmp_path, capsys):
+    results, script = tmp_path / "runs", tmp_path / "grid.sbatch"
+    assert grid(scripts, results, "--methods", "fake", "expert", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1, 2, 3,
+                "--workers", 4, "--slurm", script, "--extra-args", "--epochs 2") == 0
+    text = script.read_text()
+    tasks = re.findall(r"^  (\d+)\) one (\S+) (\S+) (\d+) ;;$", text, re.M)
+    expected = {("fake", env, str(seed)) for env in ("Hopper-v4", "Ant-v4") for seed in (1, 2, 3)} | {("expert", "Hopper-v4", "0"), ("expert", "Ant-v4", "0")}
+    assert [int(index) for index, *_ in tasks] == list(range(len(expected)))
+    assert sorted(tuple(combination) for _, *combination in tasks) == sorted(expected)  # each once, nothing else
+    assert f"#SBATCH --array=0-{len(expected) - 1}%4" in text and "--extra-args '--epochs 2'" in text
+    assert calls(scripts) == [] and not list(results.rglob("*.json"))  # written, not run
+    assert subprocess.run(["bash", "-n", str(script)]).returncode == 0
+    # one array task runs its combination through the runner
+    index = next(int(index) for index, *combination in tasks if combination == ["fake", "Ant-v4", "2"])
+    task = subprocess.run(["bash", str(script)], env=dict(os.environ, SLURM_ARRAY_TASK_ID=str(index)), capture_output=True, text=True)
+    assert task.returncode == 0, task.stderr
+    assert calls(scripts) == ["Ant-v4 2"] and read_result(result_path(results, "fake", "Ant-v4", [2]), "fake", "Ant-v4")["args"]["epochs"] == 2
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--methods", "bc_oh", "nope", "--envs", "Hopper-v4"], "unknown method 'nope': choose from"),
+    (["--methods", "bc_oh", "--envs", "Hopper-v4", "Nope-v4"], "unknown env 'Nope-v4'"),
+    (["--methods", "bc_oh", "--envs", "Hopper-v4", "--extra-args", "--seeds 4"], "--extra-args sets --seeds"),
+    (["--methods", "bc_oh"], "the following arguments are required: --envs"),
+])
+def test_bad_grid_input_is_one_line(args, expected, tmp_path):
+    result = subprocess.run([sys.executable, "-m", "benchmark.run_grid", "--results-dir", str(tmp_path), *args],
+                            cwd=REPO_ROOT, capture_output=True, text=True, env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    assert_usage_error(result, expected)
+    assert result.returncode == 2 and not list(tmp_path.iterdir())
+
+
+def test_extra_args_are_read_as_the_scripts_read_them():
+    assert run_grid.explicit_settings(["--epochs", "2", "--learning-rate=1e-4", "--cuda", "--no-save-model", "--velocity-dims", "5", "6",
+                                       "--demos", "None", "--tag", "x"]) == {
+        "epochs": 2, "learning_rate": 1e-4, "cuda": True, "save_model": False, "velocity_dims": [5, 6], "demos": None, "tag": "x"}
+
+
+# ----------------------------------------------------------------------------------------------
+# Result files
+
+
+@pytest.mark.parametrize("corrupt, reason", [
+    (lambda r: r.pop("scores"), "missing keys scores"),
+    (lambda r: r.update(method="bc_so"), "holds bc_so on Hopper-v4, expected bc_oh on Hopper-v4"),
+    (lambda r: r["scores"]["1"].update(evaluations=[]), "seed 1 has no valid evaluations"),
+    (lambda r: r["scores"]["1"]["evaluations"].append([9, float("nan")]), "seed 1 has no valid evaluations"),
+    (lambda r: r["scores"]["1"].update(score=1.0), "is not the mean of its last three evaluations"),
+    (lambda r: r.update(mean="n/a"), "mean or std is not a number"),
+])
+def test_partial_or_inconsistent_results_are_refused(tmp_path, corrupt, reason):
+    path = plant(tmp_path, "bc_oh", "Hopper-v4", 1, [1.0, 2.0, 3.0, 4.0])
+    assert read_result(path, "bc_oh", "Hopper-v4")["scores"]["1"]["score"] == 3.0  # mean of the last three
+    result = json.loads(path.read_text())
+    corrupt(result)
+    path.write_text(json.dumps(result))
+    with pytest.raises(ResultError, match=re.escape(reason)):
+        read_result(path, "bc_oh", "Hopper-v4")
+
+
+# ----------------------------------------------------------------------------------------------
+# The aggregator
+
+
+def test_aggregator_numbers_and_refusals(tmp_path, capsys):
+    runs, out = tmp_path / "runs", tmp_path / "out"
+    for seed, last in ((1, 100.0), (2, 200.0), (3, 600.0)):  # seed scores 100, 200, 600 (the first evaluation drops out)
+        plant(runs, "bc_oh", "Hopper-v4", seed, [99999.0, last - 10, last, last + 10])
+    plant(runs, "c2f", "Ant-v4", 1, [4000.0, 5000.0, 6000.0])
+    expert = {"env": "Ant-v4", "seeds": [0], "checkpoint": "experts/Ant-v4.pt", "eval_episodes": 20}
+    expert_path = result_path(runs, "expert", "Ant-v4", [0])
+    expert_path.parent.mkdir(parents=True)
+    expert_path.write_text(json.dumps({**make_result("Ant-v4", "expert", expert, {0: [[0, 5500.0]]}), "std": 42.0}))
+    nonpaper = plant(runs, "bc_oh", "Hopper-v4", 4, [1.0, 1.0, 1.0], epochs=2, num_demo_samples=300)
+    corrupt = result_path(runs, "c2f", "Ant-v4", [2])
+    corrupt.write_text("{not json")
+
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"left out {nonpaper}: not the paper's settings (epochs 2 != 1000, num_demo_samples 300 != 20000)" in err
+    assert f"left out {corrupt}: unreadable JSON" in err
+    assert (out / "mujoco.csv").read_text().splitlines() == [
+        "env,method,seed,score",
+        "Hopper-v4,bc_oh,1,100.000", "Hopper-v4,bc_oh,2,200.000", "Hopper-v4,bc_oh,3,600.000",
+        "Ant-v4,c2f,1,5000.000", "Ant-v4,expert,0,5500.000"]
+    table = (out / "table2.md").read_text()
+    std = statistics.pstdev([100, 200, 600])  # 216.02
+    assert f"| BC-OH (`bc_oh`) | {300:.0f} ± {std:.0f} (n=3) | 628 ± 99 | — | 2922 ± 1266 |" in table
+    assert "| Coarse-to-fine (`c2f`) | — | 1124 ± 135 | 5000 ± 0 (n=1) | 4798 ± 304 |" in table
+    assert "| PPO expert (`expert`) | — | 3445 | 5500 ± 42 (20 ep.) | 5566 |" in table
+    assert "| DAgger 8K (`dagger`) | — | 2383 ± 294 | — | 4097 ± 418 |" in table  # not run yet: shown as missing
+    assert "Not at the paper's settings" not in table
+    assert (out / "table2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--allow-nonpaper"]) == 0
+    assert "Hopper-v4,bc_oh,4,1.000" in (out / "mujoco.csv").read_text()
+    table = (out / "table2.md").read_text()
+    assert f"{statistics.fmean([100, 200, 600, 1]):.0f} ± {statistics.pstdev([100, 200, 600, 1]):.0f} (n=4)" in table
+    assert "1 seed runs with epochs 2 != 1000, num_demo_samples 300 != 20000" in table
+
+
+def test_aggregator_without_valid_results_is_one_line(tmp_path):
+    plant(tmp_path, "bc_oh", "Hopper-v4", 1, [1.0], epochs=3)
+    result = subprocess.run([sys.executable, "-m", "benchmark.aggregate", "--results-dir", str(tmp_path), "--out", str(tmp_path / "out")],
+                            cwd=REPO_ROOT, capture_output=True, text=True)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert "not the paper's settings (epochs 3 != 1000)" in lines[0] and lines[1].startswith("error: no valid results to aggregate")
+    assert not (tmp_path / "out").exists()
+
