@@ -118,8 +118,8 @@ def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool) 
         "`python -m benchmark.run_grid` (the log beside each result starts with the command that made it).",
         "",
         "Ours: mean ± std over seeds (population std), n = seeds in the cell; a seed's score is the mean return of "
-        "its last three evaluations, as the paper reports. Paper: its Table 2 (three seeds; /work/shared/NOTES.md "
-        "section 1). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
+        "its last three evaluations, as the paper reports. Paper: its Table 2, mean ± std over three seeds (as "
+        "transcribed in NOTES.md section 1). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
         "evaluation episodes (ep.), on the clean env; the paper gives no std for it.",
         "",
         f"Settings (the paper's): {settings_text()}.",

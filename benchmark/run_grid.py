@@ -112,7 +112,7 @@ def check_options(options: Options):
             gymnasium.spec(env)
         except Exception:
             raise UsageError(f"unknown env {env!r}: use a gymnasium MuJoCo id such as Hopper-v4")
-    needs_expert = EXPERT in options.methods or "--demos" not in options.extra_args
+    needs_expert = EXPERT in options.methods or "demos" not in explicit_settings(options.extra_args)
     for env in options.envs:
         if needs_expert and not (options.scripts_dir / "experts" / f"{env}.pt").is_file():
             raise UsageError(f"no expert checkpoint experts/{env}.pt for {env}: train one with `python expert_ppo.py --env {env}` first")
