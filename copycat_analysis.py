@@ -504,7 +504,8 @@ ACTION_NAMES = {"Hopper": ["thigh", "leg", "foot"], "Walker2d": ["right thigh", 
 STATE_ROWS = {"Hopper": [(0, "torso height (m)"), (2, "thigh angle (rad)")], "Walker2d": [(0, "torso height (m)"), (2, "right thigh angle (rad)")]}
 
 
-def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: np.ndarray, lo: np.ndarray, hi: np.ndarray, episode_return: float):
+def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                     episode_return: float, late_fusion: bool):
     """CE_d / (hi_d - lo_d) along one trajectory (1: the action follows zeta fully, 0: ignores it), the state beneath."""
     family = env_id.split("-")[0]
     names = ACTION_NAMES.get(family, [f"a[{d}]" for d in range(effect.shape[1])])
@@ -512,9 +513,9 @@ def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: n
     for d in range(effect.shape[1]):
         top.plot(effect[:, d] / (hi[d] - lo[d]), lw=1, label=f"{names[d]}: do(zeta) = {lo[d]:.2f} vs {hi[d]:.2f}")
     top.set_ylabel("CE / (hi - lo)")
-    if np.ptp(effect, axis=0).max() < 1e-6:  # e.g. late fusion: the final layer is linear in zeta
-        top.text(0.01, 0.03, "constant along the trajectory: the action is linear in zeta here (late fusion's linear head), "
-                 "so CE changes only where an action is clipped at its bounds", transform=top.transAxes, fontsize=8)
+    if late_fusion:  # the paper's model: one linear layer after the join, so the effect is a weight of it
+        fig.text(0.01, 0.01, "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = |its weight on zeta_d| wherever the "
+                 "action is not clipped at its bounds (dips: clipped)", fontsize=8)
     top.set_title(f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta")
     top.legend(loc="upper right", fontsize=8)
     top.grid(alpha=0.3)
@@ -525,7 +526,7 @@ def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: n
     twin.plot(observations[:, rows[1][0]], color="tab:purple", lw=1)
     twin.set_ylabel(rows[1][1], color="tab:purple")
     bottom.set_xlabel("step")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
     write_atomically(path, lambda file: fig.savefig(file, format="png", dpi=110))
     plt.close(fig)
 
@@ -619,7 +620,8 @@ def run(args):
             "relative_demos": (effect_demos.mean(0) / (hi - lo)).tolist(), "relative_rollouts": (effect_rollouts.mean(0) / (hi - lo)).tolist()}
 
     out_dir = args.out_dir.format(env=args.env)
-    plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"])
+    plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"],
+                     saved["c2f"]["fusion"] == "late")
     plot_history_intervention(os.path.join(out_dir, "history_intervention.png"), args.env, changes)
     summary = {"env": args.env, "args": asdict(args), "history": history, "obs_noise_std": std, "demo_steps": len(actions),
                "changepoints": len(points), "action_std": scale.tolist(), "methods": report, "zeta": zeta}
