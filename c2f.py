@@ -63,6 +63,8 @@ class Args:
     """write a self-contained checkpoint per seed (weights, normalisation, args)"""
     cuda: bool = False
     """train on the GPU when there is one"""
+    cuda_graph: bool = True
+    """with --cuda, replay each training step as one captured CUDA graph (the fast path, same results as eager); --no-cuda-graph for plain eager steps"""
     fusion: Literal["late", "middle", "early"] = "late"
     """where sg(zeta) joins the policy MLP: late = beside its output feature, into the final linear layer (the paper); middle = into its second hidden layer; early = beside the history, into its input"""
     coarse_output: Literal["action", "feature"] = "action"
@@ -206,9 +208,13 @@ def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as file:
-        write(file)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+        os.replace(tmp, path)
+    finally:  # after an interruption, remove the half-written temporary file
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 # Copied from bc_oh.load_or_generate_demos
@@ -374,20 +380,77 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 # Training
 
 
-def train_coarse(policy: Policy, args, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device):
+# Copied from bc_oh.make_adam
+def make_adam(params, lr: float, fast: bool, **kwargs) -> torch.optim.Adam:
+    """Adam; a step captured in a CUDA graph needs its state on the GPU (capturable) and a tensor lr."""
+    if fast:
+        return torch.optim.Adam(params, lr=torch.tensor(lr, device="cuda"), capturable=True, **kwargs)
+    return torch.optim.Adam(params, lr=lr, **kwargs)
+
+
+# Copied from bc_oh.set_learning_rate
+def set_learning_rate(optimizer: torch.optim.Optimizer, lr: float):
+    """Set the lr in place: a CUDA graph reads a tensor lr from its fixed address at every replay."""
+    for group in optimizer.param_groups:
+        if torch.is_tensor(group["lr"]):
+            group["lr"].fill_(lr)
+        else:
+            group["lr"] = lr
+
+
+# Copied from bc_oh.CudaGraphStep
+class CudaGraphStep:
+    """The fast GPU path: a training step (forward, backward, Adam) captured once and replayed.
+
+    A step of these small networks launches dozens of tiny kernels, and on a GPU launching them costs
+    far more than running them; a CUDA graph launches them all at once. The step must read its inputs
+    from fixed tensors (e.g. a minibatch index buffer filled before each call). The first `warmup`
+    calls are ordinary steps on a side stream, as capture requires; the next call captures the step
+    (capture runs nothing) and replays it, as does every call after. Disabled, it is the plain step.
+    """
+
+    def __init__(self, step, enabled: bool, warmup: int = 3):
+        self.step, self.enabled, self.warmup, self.graph, self.output = step, enabled, warmup, None, None
+
+    def __call__(self):
+        if not self.enabled:
+            return self.step()
+        if self.warmup > 0:
+            self.warmup -= 1
+            side_stream = torch.cuda.Stream()
+            side_stream.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(side_stream):
+                output = self.step()
+            torch.cuda.current_stream().wait_stream(side_stream)
+            return output
+        if self.graph is None:
+            self.graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(self.graph):
+                self.output = self.step()
+        self.graph.replay()
+        return self.output
+
+
+def train_coarse(policy: Policy, args, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device, fast: bool):
     """Stage 1 of --two-stage: the coarse model alone, on its loss, for --epochs (lr decayed to zero); then frozen."""
-    optimizer = torch.optim.Adam(policy.coarse.parameters(), lr=args.learning_rate)
+    optimizer = make_adam(policy.coarse.parameters(), args.learning_rate, fast)
     steps_per_epoch = len(inputs) // args.batch_size
     total_steps, start = args.epochs * steps_per_epoch, time.time()
-    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: 1 - step / total_steps)  # linear decay
     generator = torch.Generator(device=device).manual_seed(seed)
-    for step in range(1, total_steps + 1):
-        idx = torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+
+    def train_step():
         loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
-        schedule.step()
+        return loss
+
+    train_step = CudaGraphStep(train_step, enabled=fast)
+    for step in range(1, total_steps + 1):
+        set_learning_rate(optimizer, args.learning_rate * (1 - (step - 1) / total_steps))  # linear decay
+        idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
+        loss = train_step()
         if step % (steps_per_epoch * max(1, args.epochs // 20)) == 0 or step == total_steps:
             eta = (time.time() - start) / step * (total_steps - step) / 60
             print(f"seed {seed} | stage 1 (coarse model) | epoch {step // steps_per_epoch}/{args.epochs} | coarse loss {loss.item():.5f} | ETA {eta:.1f} min", flush=True)
@@ -403,25 +466,35 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
+    fast = device.type == "cuda" and args.cuda_graph
     if args.two_stage:  # stage 1: the coarse model alone, then frozen; the epochs below are stage 2
-        train_coarse(policy, args, inputs, targets, seed, device)
-    optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad], lr=args.learning_rate)
+        train_coarse(policy, args, inputs, targets, seed, device, fast)
+    optimizer = make_adam([p for p in policy.parameters() if p.requires_grad], args.learning_rate, fast)
     steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start = args.epochs * steps_per_epoch, 0, [], time.time()
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
 
+    def train_step():
+        zeta, action = policy.coarse_and_final(inputs[idx])
+        loss = ((action - targets[idx]) ** 2).mean()  # the final loss; Eq. 2 adds the coarse loss
+        if not args.two_stage:
+            loss = loss + ((zeta - targets[idx]) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss
+
+    train_step = CudaGraphStep(train_step, enabled=fast)
     for epoch in range(1, args.epochs + 1):
+        epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            optimizer.param_groups[0]["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
-            idx = torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator)
-            zeta, action = policy.coarse_and_final(inputs[idx])
-            loss = ((action - targets[idx]) ** 2).mean()  # the final loss; Eq. 2 adds the coarse loss
-            if not args.two_stage:
-                loss = loss + ((zeta - targets[idx]) ** 2).mean()
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
+            set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
+            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
+            loss = train_step()
             step += 1
+        last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
+        train_time += time.time() - epoch_start
         if epoch % args.eval_every == 0 or epoch == args.epochs:
             policy.eval()
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
@@ -429,8 +502,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {loss.item():.5f} | last eval {last} | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim}
+            print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
+                  f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
 
 
 # Copied from bc_oh.run
@@ -442,6 +516,7 @@ def run(args):
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
     device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
+    torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
     demos = load_or_generate_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, env=args.env)
     scores, per_seed = [], {}
@@ -449,7 +524,7 @@ def run(args):
         result = train_seed(args, demos, seed, device)
         score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
         scores.append(score)
-        per_seed[seed] = {"score": score, "evaluations": result["evaluations"]}
+        per_seed[seed] = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
         if args.save_model:
             checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
                           "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}

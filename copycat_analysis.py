@@ -185,9 +185,13 @@ def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as file:
-        write(file)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+        os.replace(tmp, path)
+    finally:  # after an interruption, remove the half-written temporary file
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 # Copied from bc_oh.load_or_generate_demos

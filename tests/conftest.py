@@ -27,7 +27,7 @@ def run_script(script, *args, cwd=None, timeout=120):
     silenced (PYTHONWARNINGS=ignore) so stderr holds only what the script itself prints.
     Arguments may be str, int, float or Path.
     """
-    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    env = dict(os.environ, PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1")
     command = [sys.executable, str(REPO_ROOT / script), *map(str, args)]
     if cwd is not None:
         return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)

@@ -58,7 +58,7 @@ def test_bc_oh_smoke_run_generates_demos_and_reports(tmp_path):
     result = smoke("bc_oh.py", workdir)
     assert "generating 300 demonstration steps with experts/Hopper-v4.pt" in result.stdout
     assert (workdir / "demos" / "Hopper-v4_300.npz").is_file()
-    assert re.search(r"seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| ETA", result.stdout)
+    assert re.search(r"seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| \d+\.\d+ ms/step \| ETA", result.stdout)
     check_result(result, workdir, "bc_oh", [1])
 
 

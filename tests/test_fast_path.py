@@ -1,0 +1,108 @@
+"""The fast GPU path (CUDA-graph capture of the training step): its control flow on any machine, and on a
+GPU that it trains exactly as the eager path does."""
+import contextlib
+
+import pytest
+import torch
+
+import average_ensemble
+import bc_oh
+import c2f
+import fca
+import keyframe
+from conftest import fake_demos, skip_evaluation, tiny_args
+
+
+class FakeGraph:
+    """Stands in for torch.cuda.CUDAGraph on a CPU machine, counting captures and replays."""
+
+    captures, replays = 0, 0
+
+    def replay(self):
+        FakeGraph.replays += 1
+
+
+@pytest.fixture
+def fake_cuda(monkeypatch):
+    """Fake streams and graphs, so that CudaGraphStep's warm-up / capture / replay logic runs on a CPU."""
+    capturing = {}
+
+    @contextlib.contextmanager
+    def graph(g):
+        FakeGraph.captures += 1
+        capturing["graph"] = g
+        yield
+        capturing.pop("graph")
+
+    class Stream:
+        def wait_stream(self, other):
+            pass
+
+    FakeGraph.captures = FakeGraph.replays = 0
+    monkeypatch.setattr(torch.cuda, "CUDAGraph", FakeGraph)
+    monkeypatch.setattr(torch.cuda, "graph", graph)
+    monkeypatch.setattr(torch.cuda, "Stream", Stream)
+    monkeypatch.setattr(torch.cuda, "current_stream", lambda: Stream())
+    monkeypatch.setattr(torch.cuda, "stream", lambda stream: contextlib.nullcontext())
+    return capturing
+
+
+def test_disabled_graph_step_is_the_plain_step():
+    calls = []
+    step = bc_oh.CudaGraphStep(lambda: calls.append(len(calls)) or len(calls), enabled=False)
+    assert [step() for _ in range(5)] == [1, 2, 3, 4, 5]
+    assert step.graph is None
+
+
+def test_graph_step_warms_up_then_captures_once_then_replays(fake_cuda):
+    calls = []
+
+    def train_step():
+        calls.append("captured" if "graph" in fake_cuda else "eager")
+        return torch.tensor(float(len(calls)))
+
+    step = bc_oh.CudaGraphStep(train_step, enabled=True, warmup=3)
+    outputs = [step() for _ in range(3)]
+    assert calls == ["eager"] * 3 and [o.item() for o in outputs] == [1.0, 2.0, 3.0]  # real steps, each its own output
+    assert FakeGraph.captures == 0
+    static_output = step()  # the 4th call records the step inside the capture, then replays it
+    assert calls == ["eager"] * 3 + ["captured"] and FakeGraph.captures == 1 and FakeGraph.replays == 1
+    for _ in range(5):
+        assert step() is static_output  # replays refill the same static output tensor; Python is not re-run
+    assert len(calls) == 4 and FakeGraph.captures == 1 and FakeGraph.replays == 6
+
+
+def test_set_learning_rate_in_place_for_tensor_and_float_lr():
+    params = [torch.nn.Parameter(torch.zeros(2))]
+    plain = bc_oh.make_adam(params, 1e-3, fast=False)
+    bc_oh.set_learning_rate(plain, 5e-4)
+    assert plain.param_groups[0]["lr"] == 5e-4
+    tensor_lr = torch.optim.Adam(params, lr=torch.tensor(1e-3))
+    address = tensor_lr.param_groups[0]["lr"].data_ptr()
+    bc_oh.set_learning_rate(tensor_lr, 2e-4)
+    assert tensor_lr.param_groups[0]["lr"].data_ptr() == address  # a captured graph keeps reading this address
+    assert tensor_lr.param_groups[0]["lr"].item() == pytest.approx(2e-4)
+
+
+def test_cpu_training_never_uses_the_graph(monkeypatch, capsys):
+    """--cuda-graph is the default, but without a GPU the plain eager step runs (no capture attempted)."""
+    skip_evaluation(monkeypatch, bc_oh)
+    monkeypatch.setattr(torch.cuda, "CUDAGraph", lambda: pytest.fail("captured a CUDA graph on the CPU"))
+    result = bc_oh.train_seed(tiny_args(bc_oh), fake_demos(), 1, torch.device("cpu"))
+    assert result["ms_per_step"] > 0
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU: the fast path captures CUDA graphs")
+@pytest.mark.parametrize("module", [bc_oh, c2f, fca, keyframe, average_ensemble], ids=lambda module: module.METHOD)
+def test_fast_path_matches_eager_step_for_step(module, monkeypatch, capsys):
+    """Same seed, same minibatches: the graph-replayed training ends with the eager training's weights."""
+    skip_evaluation(monkeypatch, module)
+    device = torch.device("cuda")
+    torch.backends.cudnn.deterministic = True
+    weights = {}
+    for fast in (False, True):
+        args = tiny_args(module, epochs=3, cuda=True, cuda_graph=fast)
+        result = module.train_seed(args, fake_demos(n=512), 1, device)
+        weights[fast] = {k: v.detach().cpu().clone() for k, v in result["policy"].state_dict().items()}
+    for name, eager in weights[False].items():
+        assert torch.allclose(eager, weights[True][name], rtol=1e-4, atol=1e-5), name
