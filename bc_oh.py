@@ -6,8 +6,11 @@ it: the copycat shortcut that coarse-to-fine imitation (c2f.py) fights.
 
     python bc_oh.py --env Hopper-v4
 """
+import contextlib
+import io
 import json
 import os
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -446,9 +449,33 @@ def run(args):
     print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seeds")
 
 
+def parse_args():
+    """tyro.cli(Args), but a bad flag or value becomes a UsageError: one line instead of tyro's box."""
+    box = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(box):
+            return tyro.cli(Args)
+    except SystemExit as stop:
+        if not stop.code:  # --help
+            raise
+        # Below the box's title, rules of "─" (or "-", without UTF-8) split it into sections: the
+        # first says what went wrong, and a "Perhaps you meant:" section names the likely flag.
+        sections = [[]]
+        for line in re.sub(r"\x1b\[[0-9;]*m", "", box.getvalue()).splitlines()[1:]:
+            text = line.strip().strip("│╭╮╰╯").strip()
+            if text and set(text) <= set("─-"):
+                sections.append([])
+            elif text:
+                sections[-1].append(text)
+        sections = [section for section in sections if section] or [["bad command line"]]
+        problem = " ".join(sections[0]).rstrip(".")
+        hint = next((section[1] for section in sections if section[0] == "Perhaps you meant:" and len(section) > 1), None)
+        raise UsageError(f"{problem}{f' (perhaps you meant {hint})' if hint else ''}: see --help for every flag and its values")
+
+
 if __name__ == "__main__":
     try:
-        run(tyro.cli(Args))
+        run(parse_args())
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
