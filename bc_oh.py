@@ -7,6 +7,7 @@ it: the copycat shortcut that coarse-to-fine imitation (c2f.py) fights.
     python bc_oh.py --env Hopper-v4
 """
 import contextlib
+import hashlib
 import io
 import json
 import os
@@ -197,18 +198,38 @@ def write_atomically(path: str, write):
             os.remove(tmp)
 
 
+def sha256_of(path: str) -> str:
+    with open(path, "rb") as file:
+        return hashlib.sha256(file.read()).hexdigest()
+
+
+def cached_demos_are_current(path: str, expert_path: str) -> bool:
+    """A demo cache is current if it was rolled out by the expert now at expert_path (its meta records
+    the expert's SHA-256), so a retrained or different --expert never reuses another expert's demos."""
+    if not os.path.isfile(path):
+        return False
+    if not os.path.isfile(expert_path):
+        return True  # no expert to compare with (demos copied from elsewhere): use them
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            recorded = json.loads(str(data["meta"])).get("expert_sha256")
+    except Exception:
+        return False  # unreadable: generate it again
+    return recorded == sha256_of(expert_path)
+
+
 def load_or_generate_demos(args, env: gym.Env) -> dict:
-    """The demos of --demos, or the cached expert rollout, generating it on first use."""
+    """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
     path = args.demos or f"demos/{args.env}_{num_samples}.npz"
-    if args.demos is None and not os.path.isfile(path):
-        expert_path = args.expert.format(env=args.env)
+    expert_path = args.expert.format(env=args.env)
+    if args.demos is None and not cached_demos_are_current(path, expert_path):
         if not os.path.isfile(expert_path):
             raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
-        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
         demos = generate_demos(args.env, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "num_samples": num_samples, "seed": 0})
+        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples, "seed": 0})
         write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
     if not os.path.isfile(path):
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")

@@ -1,6 +1,9 @@
 """The data pipeline every method shares (bc_oh.py holds the originals; check_copies keeps the copies equal):
 noise on the velocities, history stacking in training and evaluation, demo generation and caching.
 Bad input is tested through the command line in test_core_scripts.py."""
+import json
+import os
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -125,3 +128,33 @@ def test_demo_cache_round_trips(tmp_path, monkeypatch):
     assert all(np.array_equal(again[key], demos[key]) for key in demos)
     args.demos = str(cache)  # the same file through --demos
     assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], demos["actions"])
+
+
+def test_demo_cache_follows_its_expert(tmp_path, monkeypatch):
+    """A cache rolled out by one expert is not reused for another (or a retrained one at the same path);
+    without any expert file to compare with, the cache is used as it is."""
+    import shutil
+
+    import torch
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(REPO_ROOT / "experts" / "Hopper-v4.pt", tmp_path / "expert.pt")
+    args = tiny_args(bc_oh, num_demo_samples=120, expert="expert.pt")
+    env = gym.make("Hopper-v4")
+    first = bc_oh.load_or_generate_demos(args, env)
+    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
+        assert json.loads(str(saved["meta"]))["expert_sha256"] == bc_oh.sha256_of("expert.pt")
+
+    checkpoint = torch.load("expert.pt", weights_only=True)  # "retrain" it: other weights, same path
+    checkpoint["actor"] = {key: value + 0.05 for key, value in checkpoint["actor"].items()}
+    torch.save(checkpoint, "expert.pt")
+    retrained = bc_oh.load_or_generate_demos(args, env)
+    assert not np.array_equal(retrained["actions"], first["actions"]), "the old expert's demos were reused"
+
+    def must_not_run(*_):
+        raise AssertionError("the cached demos were generated again")
+
+    monkeypatch.setattr(bc_oh, "generate_demos", must_not_run)
+    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
+    os.remove("expert.pt")  # demos copied without their expert: used as they are
+    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
