@@ -40,6 +40,9 @@ def run_cli(main):
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
+    except BrokenPipeError:  # output piped into `head` that stopped reading: end quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so the exit-time flush cannot fail
+        sys.exit(1)
 
 
 def result_path(results_dir, method: str, env: str, seeds) -> Path:

@@ -205,6 +205,17 @@ def test_bad_grid_input_is_one_line(args, expected, tmp_path):
     assert result.returncode == 2 and not list(tmp_path.iterdir())
 
 
+
+def test_a_dry_run_piped_into_head_ends_quietly(tmp_path):
+    """`run_grid ... --dry-run | head`: the reader goes away early; no BrokenPipeError traceback."""
+    grid = subprocess.Popen([sys.executable, "-m", "benchmark.run_grid", "--results-dir", str(tmp_path), "--dry-run",
+                             "--methods", "bc_oh", "c2f", "--envs", "Hopper-v4", "Ant-v4", "--seeds", *map(str, range(1, 200))],
+                            cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert grid.stdout.readline().startswith("run  bc_oh Hopper-v4 seed 1: ")
+    grid.stdout.close()  # like head after its lines: the rest of the ~800-line listing meets a closed pipe
+    stderr = grid.stderr.read()
+    assert grid.wait(timeout=60) == 1 and stderr == ""
+
 def test_extra_args_are_read_as_the_scripts_read_them():
     assert run_grid.explicit_settings(["--epochs", "2", "--learning-rate=1e-4", "--cuda", "--no-save-model", "--velocity-dims", "5", "6",
                                        "--demos", "None", "--tag", "x"]) == {
