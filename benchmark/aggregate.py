@@ -9,6 +9,7 @@ Reads every <results-dir>/<method>/<env>/result_seeds*.json and writes
 Corrupt or partial results, and runs at settings other than the paper's (unless --allow-nonpaper), are
 reported on stderr, naming the file, and left out.
 """
+import os
 import statistics
 import sys
 from collections import Counter
@@ -108,13 +109,13 @@ def settings_text() -> str:
                      for name in hopper)
 
 
-def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool) -> str:
+def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, readme=None) -> str:
     methods, envs, ours = build_table(records)
     lines = [
         "# Table 2: imitation on MuJoCo with noisy velocities, ours beside the paper's",
         "",
         f"Made by `python -m benchmark.aggregate --results-dir {results_dir} --out {out}"
-        + (" --allow-nonpaper" if allow_nonpaper else "") + f"` from {len(records)} per-seed results, made by "
+        + (" --allow-nonpaper" if allow_nonpaper else "") + (f" --readme {readme}" if readme else "") + f"` from {len(records)} per-seed results, made by "
         "`python -m benchmark.run_grid` (the log beside each result starts with the command that made it).",
         "",
         "Ours: mean ± std over seeds (population std), n = seeds in the cell; a seed's score is the mean return of "
@@ -171,12 +172,35 @@ def plot(records: list, path: Path):
     plt.close(figure)
 
 
+README_START, README_END = "<!-- table2 -->", "<!-- /table2 -->"
+
+
+def readme_parts(readme: Path) -> tuple:
+    """The README's text up to its table2 start marker, and from its end marker on."""
+    if not readme.is_file():
+        raise UsageError(f"README {readme} not found: check the --readme path")
+    text = readme.read_text()
+    if text.count(README_START) != 1 or text.count(README_END) != 1 or text.index(README_START) > text.index(README_END):
+        raise UsageError(f"{readme} needs one {README_START} line and, after it, one {README_END} line: add them where the table goes")
+    return text[:text.index(README_START) + len(README_START)], text[text.index(README_END):]
+
+
+def update_readme(readme: Path, table: str, image: Path):
+    """Put the table (without its title) and the plot between the README's table2 markers; keep the rest."""
+    before, after = readme_parts(readme)
+    body = table.split("\n", 2)[2].strip()  # below the "# Table 2" title and its blank line
+    write_text(readme, f"{before}\n{body}\n\n![Table 2]({os.path.relpath(image, readme.parent)})\n{after}")
+
+
 def main(argv=None) -> int:
     parser = OneLineParser(prog="python -m benchmark.aggregate", description=__doc__.split("\n\n")[0])
     parser.add_argument("--results-dir", type=Path, default=Path("results/runs"), help="where benchmark.run_grid wrote the runs")
     parser.add_argument("--out", type=Path, default=Path("results"), help="where mujoco.csv, table2.md and table2.png go")
     parser.add_argument("--allow-nonpaper", action="store_true", help="include runs at settings other than the paper's")
+    parser.add_argument("--readme", type=Path, help=f"also put the table and plot into this file, between {README_START} and {README_END}")
     args = parser.parse_args(argv)
+    if args.readme:
+        readme_parts(args.readme)  # check the markers before anything is written
     if not args.results_dir.is_dir():
         raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.run_grid first, or pass --results-dir")
     records, problems = collect(args.results_dir, args.allow_nonpaper)
@@ -187,11 +211,14 @@ def main(argv=None) -> int:
     methods, envs, _ = build_table(records)
     rows = sorted(records, key=lambda r: (envs.index(r.env), methods.index(r.method), r.seed))
     write_text(args.out / "mujoco.csv", "env,method,seed,score\n" + "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in rows))
-    table = markdown(records, args.results_dir, args.out, args.allow_nonpaper)
+    table = markdown(records, args.results_dir, args.out, args.allow_nonpaper, args.readme)
     write_text(args.out / "table2.md", table)
     plot(records, args.out / "table2.png")
+    if args.readme:
+        update_readme(args.readme, table, args.out / "table2.png")
     print(table)
     print(f"wrote {args.out / 'mujoco.csv'} ({len(rows)} rows), {args.out / 'table2.md'}, {args.out / 'table2.png'}"
+          + (f", and the table into {args.readme}" if args.readme else "")
           + (f"; left out {len(problems)} (listed above)" if problems else ""))
     return 0
 

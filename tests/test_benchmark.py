@@ -13,7 +13,7 @@ from conftest import REPO_ROOT, assert_usage_error
 
 from benchmark import aggregate, run_grid
 from benchmark.paper import paper_settings
-from benchmark.results import ResultError, make_result, read_result, result_path
+from benchmark.results import ResultError, UsageError, make_result, read_result, result_path
 
 FAKE_METHOD = f'''
 """Stand-in method: writes a result at once. FAKE_CRASH_SEED crashes that seed, FAKE_SILENT_SEED exits 0 without a result,
@@ -284,6 +284,25 @@ def test_aggregator_numbers_and_refusals(tmp_path, capsys):
     assert f"{statistics.fmean([100, 200, 600, 1]):.0f} ± {statistics.pstdev([100, 200, 600, 1]):.0f} (n=4)" in table
     assert "1 seed runs with epochs 2 != 1000, num_demo_samples 300 != 20000" in table
 
+
+
+def test_aggregator_puts_the_table_into_the_readme_between_its_markers(tmp_path, capsys):
+    runs, out, readme = tmp_path / "runs", tmp_path / "results", tmp_path / "README.md"
+    plant(runs, "c2f", "Ant-v4", 1, [4000.0, 5000.0, 6000.0])
+    readme.write_text("# Title\n\n<!-- table2 -->\nthe old table\n<!-- /table2 -->\n\nReading.\n")
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert text.startswith("# Title\n\n<!-- table2 -->\nMade by `python -m benchmark.aggregate --results-dir ")
+    assert f"--readme {readme}` from 1 per-seed results" in text and "the old table" not in text
+    assert "| Coarse-to-fine (`c2f`) | 5000 ± 0 (n=1) | 4798 ± 304 |" in text
+    assert text.endswith("\n\n![Table 2](results/table2.png)\n<!-- /table2 -->\n\nReading.\n")
+    assert (out / "table2.md").read_text().split("\n", 2)[2].strip() in text
+
+    readme.write_text("# Title without markers\n")
+    (out / "mujoco.csv").unlink()
+    with pytest.raises(UsageError, match="needs one <!-- table2 --> line and, after it, one <!-- /table2 --> line"):
+        aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)])
+    assert not (out / "mujoco.csv").exists(), "nothing is written before the README is checked"
 
 def test_aggregator_without_valid_results_is_one_line(tmp_path):
     plant(tmp_path, "bc_oh", "Hopper-v4", 1, [1.0], epochs=3)
