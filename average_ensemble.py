@@ -22,12 +22,16 @@ from dataclasses import asdict, dataclass, field
 from typing import List, Optional
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
 import tyro
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
+# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHOD = "average_ensemble"
 
 

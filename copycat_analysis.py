@@ -31,6 +31,7 @@ from typing import Optional
 
 import gymnasium as gym
 import matplotlib
+import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
@@ -40,6 +41,9 @@ matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
+# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHODS = ("bc_so", "bc_oh", "c2f")
 COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green"}
 

@@ -158,3 +158,16 @@ def test_demo_cache_follows_its_expert(tmp_path, monkeypatch):
     assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
     os.remove("expert.pt")  # demos copied without their expert: used as they are
     assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
+
+
+def test_mujoco_deprecation_warning_of_halfcheetah_is_dropped_and_others_kept(tmp_path, monkeypatch, capfd):
+    """Importing a script installs MuJoCo's warning hook: making HalfCheetah prints nothing and leaves no
+    MUJOCO_LOG.TXT (without the hook MuJoCo writes both), while any other MuJoCo warning is printed."""
+    import mujoco
+
+    monkeypatch.chdir(tmp_path)
+    capfd.readouterr()
+    gym.make("HalfCheetah-v4").close()
+    assert "settotalmass" not in "".join(capfd.readouterr()) and not (tmp_path / "MUJOCO_LOG.TXT").exists()
+    mujoco.get_mju_user_warning()("something else")
+    assert capfd.readouterr().err == "MuJoCo warning: something else\n"
