@@ -35,6 +35,8 @@ METHOD = "bc_oh"
 class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    frame_skip: Optional[int] = None
+    """simulator steps per action (default: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant); episodes and rewards are rescaled to the same simulated time and return scale"""
     seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, run one after another; the score is mean ± std over them"""
     demos: Optional[str] = None
@@ -45,6 +47,8 @@ class Args:
     """demonstration steps to generate (default as in the paper: 20000 for Hopper, 10000 otherwise)"""
     obs_noise_std: float = 0.2
     """std of the Gaussian noise on the velocity entries of every observation (partial observability)"""
+    hide_velocities: bool = False
+    """zero the velocity entries of every observation instead of adding noise (the positions-only setting)"""
     velocity_dims: Optional[List[int]] = None
     """indices of the velocity entries, for envs not in the built-in table"""
     history: int = 2
@@ -92,6 +96,8 @@ def check_common_args(args):
         raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
     if args.learning_rate is not None and not args.learning_rate > 0:
         raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}: e.g. 1e-4, or leave it out for the paper's default")
+    if args.frame_skip is not None and args.frame_skip <= 0:
+        raise UsageError(f"--frame-skip must be positive, got {args.frame_skip}: e.g. 1, or leave it out for the env's own")
 
 
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
@@ -112,28 +118,41 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     return list(range(*known[family]))
 
 
-class VelocityNoise(gym.ObservationWrapper):
-    """Adds fresh N(0, std^2) noise to the velocity entries of every observation: a noisy sensor."""
+class PartialObservation(gym.ObservationWrapper):
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
+    with hide, those entries zeroed (positions only)."""
 
-    def __init__(self, env: gym.Env, dims: list, std: float, seed: int):
+    def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
-        self.dims, self.std, self.rng = np.asarray(dims), std, np.random.default_rng(seed)
+        self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
 
     def observation(self, obs):
         obs = np.array(obs, dtype=np.float64)
-        obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        if self.hide:
+            obs[self.dims] = 0.0
+        else:
+            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
         return obs
 
 
-def make_env(env_id: str) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces."""
+def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
+    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
+    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
         raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
-    return env
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -173,9 +192,9 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     return policy.eval()
 
 
-def generate_demos(env_id: str, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
-    env, obs_list, action_list, starts = gym.make(env_id), [], [], []
+    env, obs_list, action_list, starts = make_env(env_id, frame_skip), [], [], []
     obs, _ = env.reset(seed=seed)
     start = True
     for _ in range(num_samples):
@@ -207,36 +226,56 @@ def sha256_of(path: str) -> str:
         return hashlib.sha256(file.read()).hexdigest()
 
 
-def cached_demos_are_current(path: str, expert_path: str) -> bool:
-    """A demo cache is current if it was rolled out by the expert now at expert_path (its meta records
-    the expert's SHA-256), so a retrained or different --expert never reuses another expert's demos."""
-    if not os.path.isfile(path):
+def demo_meta(path: str) -> dict:
+    """The JSON meta of a demo file ({} when it has none or cannot be read)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return json.loads(str(data["meta"])) if "meta" in data else {}
+    except Exception:
+        return {}
+
+
+def cached_demos_are_current(path: str, expert_path: str, frame_skip: int, native: int) -> bool:
+    """A demo cache is current if it was rolled out at this frame skip (a cache without the record is
+    native) by the expert now at expert_path (its meta records the expert's SHA-256), so a retrained or
+    different --expert never reuses another expert's demos."""
+    if not os.path.isfile(path) or demo_meta(path).get("frame_skip", native) != frame_skip:
         return False
     if not os.path.isfile(expert_path):
         return True  # no expert to compare with (demos copied from elsewhere): use them
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            recorded = json.loads(str(data["meta"])).get("expert_sha256")
-    except Exception:
-        return False  # unreadable: generate it again
-    return recorded == sha256_of(expert_path)
+    return demo_meta(path).get("expert_sha256") == sha256_of(expert_path)
+
+
+def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
+    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    same_episode = ~episode_starts[1:]
+    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
 def load_or_generate_demos(args, env: gym.Env) -> dict:
     """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
-    path = args.demos or f"demos/{args.env}_{num_samples}.npz"
+    native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
+    frame_skip = args.frame_skip or native
+    rate = "" if frame_skip == native else f"_fs{frame_skip}"
+    path = args.demos or f"demos/{args.env}{rate}_{num_samples}.npz"
     expert_path = args.expert.format(env=args.env)
-    if args.demos is None and not cached_demos_are_current(path, expert_path):
+    if args.demos is None and not cached_demos_are_current(path, expert_path, frame_skip, native):
         if not os.path.isfile(expert_path):
             raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
         print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
-        demos = generate_demos(args.env, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples, "seed": 0})
+        demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
+        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples,
+                           "seed": 0, "frame_skip": frame_skip})
         write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
     if not os.path.isfile(path):
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
+    recorded_rate = demo_meta(path).get("frame_skip", native)
+    if recorded_rate != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
     try:
         with np.load(path, allow_pickle=False) as data:
             demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
@@ -249,14 +288,20 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
     demos["episode_starts"][0] = True
+    print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
+          "(near 0: copying the last action is a shortcut)")
     return demos
 
 
-def add_obs_noise(observations: np.ndarray, dims: list, std: float, seed: int) -> np.ndarray:
-    """Noise on the velocity entries, drawn once per demo sample, as a noisy sensor at collection time."""
-    noisy = observations.copy()
-    noisy[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(noisy), len(dims)))
-    return noisy
+def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
+    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
+    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    observed = observations.copy()
+    if hide:
+        observed[:, dims] = 0.0
+    else:
+        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    return observed
 
 
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
@@ -324,11 +369,13 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """Returns of `episodes` parallel episodes of the deterministic policy on the noisy env."""
-    probe = gym.make(args.env)
+    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
+    probe = make_env(args.env, args.frame_skip)
     dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
+    probe.close()
     envs = gym.vector.SyncVectorEnv(
-        [lambda i=i: VelocityNoise(gym.make(args.env), dims, args.obs_noise_std, seed + i) for i in range(episodes)],
+        [lambda i=i: PartialObservation(make_env(args.env, args.frame_skip), dims, args.obs_noise_std, args.hide_velocities, seed + i)
+         for i in range(episodes)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     obs, _ = envs.reset(seed=seed)
@@ -402,7 +449,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = add_obs_noise(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, seed)
+    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
     inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
@@ -447,6 +494,8 @@ def run(args):
     check_common_args(args)
     env = make_env(args.env)
     velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
+    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
+    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
     device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")

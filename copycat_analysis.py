@@ -108,30 +108,43 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     return list(range(*known[family]))
 
 
-# Copied from bc_oh.VelocityNoise
-class VelocityNoise(gym.ObservationWrapper):
-    """Adds fresh N(0, std^2) noise to the velocity entries of every observation: a noisy sensor."""
+# Copied from bc_oh.PartialObservation
+class PartialObservation(gym.ObservationWrapper):
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
+    with hide, those entries zeroed (positions only)."""
 
-    def __init__(self, env: gym.Env, dims: list, std: float, seed: int):
+    def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
-        self.dims, self.std, self.rng = np.asarray(dims), std, np.random.default_rng(seed)
+        self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
 
     def observation(self, obs):
         obs = np.array(obs, dtype=np.float64)
-        obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        if self.hide:
+            obs[self.dims] = 0.0
+        else:
+            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
         return obs
 
 
 # Copied from bc_oh.make_env
-def make_env(env_id: str) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces."""
+def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
+    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
+    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
         raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
-    return env
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -172,9 +185,9 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 
 
 # Copied from bc_oh.generate_demos
-def generate_demos(env_id: str, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
-    env, obs_list, action_list, starts = gym.make(env_id), [], [], []
+    env, obs_list, action_list, starts = make_env(env_id, frame_skip), [], [], []
     obs, _ = env.reset(seed=seed)
     start = True
     for _ in range(num_samples):
@@ -208,20 +221,35 @@ def sha256_of(path: str) -> str:
         return hashlib.sha256(file.read()).hexdigest()
 
 
+# Copied from bc_oh.demo_meta
+def demo_meta(path: str) -> dict:
+    """The JSON meta of a demo file ({} when it has none or cannot be read)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return json.loads(str(data["meta"])) if "meta" in data else {}
+    except Exception:
+        return {}
+
+
 # Copied from bc_oh.cached_demos_are_current
-def cached_demos_are_current(path: str, expert_path: str) -> bool:
-    """A demo cache is current if it was rolled out by the expert now at expert_path (its meta records
-    the expert's SHA-256), so a retrained or different --expert never reuses another expert's demos."""
-    if not os.path.isfile(path):
+def cached_demos_are_current(path: str, expert_path: str, frame_skip: int, native: int) -> bool:
+    """A demo cache is current if it was rolled out at this frame skip (a cache without the record is
+    native) by the expert now at expert_path (its meta records the expert's SHA-256), so a retrained or
+    different --expert never reuses another expert's demos."""
+    if not os.path.isfile(path) or demo_meta(path).get("frame_skip", native) != frame_skip:
         return False
     if not os.path.isfile(expert_path):
         return True  # no expert to compare with (demos copied from elsewhere): use them
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            recorded = json.loads(str(data["meta"])).get("expert_sha256")
-    except Exception:
-        return False  # unreadable: generate it again
-    return recorded == sha256_of(expert_path)
+    return demo_meta(path).get("expert_sha256") == sha256_of(expert_path)
+
+
+# Copied from bc_oh.copy_error
+def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
+    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    same_episode = ~episode_starts[1:]
+    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
 # Copied from bc_oh.load_or_generate_demos
@@ -229,17 +257,24 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
     """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
-    path = args.demos or f"demos/{args.env}_{num_samples}.npz"
+    native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
+    frame_skip = args.frame_skip or native
+    rate = "" if frame_skip == native else f"_fs{frame_skip}"
+    path = args.demos or f"demos/{args.env}{rate}_{num_samples}.npz"
     expert_path = args.expert.format(env=args.env)
-    if args.demos is None and not cached_demos_are_current(path, expert_path):
+    if args.demos is None and not cached_demos_are_current(path, expert_path, frame_skip, native):
         if not os.path.isfile(expert_path):
             raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
         print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
-        demos = generate_demos(args.env, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples, "seed": 0})
+        demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
+        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples,
+                           "seed": 0, "frame_skip": frame_skip})
         write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
     if not os.path.isfile(path):
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
+    recorded_rate = demo_meta(path).get("frame_skip", native)
+    if recorded_rate != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
     try:
         with np.load(path, allow_pickle=False) as data:
             demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
@@ -252,26 +287,33 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
     demos["episode_starts"][0] = True
+    print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
+          "(near 0: copying the last action is a shortcut)")
     return demos
 
 
-def heldout_demos(args, env: gym.Env) -> dict:
+def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
     """--demos, or a fresh expert rollout from reset seed --seed: states the policies were not trained on."""
-    if args.demos is not None:  # the loader of the method scripts checks the file and its shapes
-        return load_or_generate_demos(SimpleNamespace(demos=args.demos, env=args.env, num_demo_samples=None, expert=args.expert, batch_size=1), env)
+    if args.demos is not None:  # the loader of the method scripts checks the file, its shapes and its rate
+        return load_or_generate_demos(SimpleNamespace(demos=args.demos, env=args.env, num_demo_samples=None, expert=args.expert, batch_size=1,
+                                                      frame_skip=frame_skip), env)
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos")
     print(f"generating {args.num_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})")
-    return generate_demos(args.env, load_expert(expert_path, args.env), args.num_samples, seed=args.seed)
+    return generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), args.num_samples, seed=args.seed)
 
 
-# Copied from bc_oh.add_obs_noise
-def add_obs_noise(observations: np.ndarray, dims: list, std: float, seed: int) -> np.ndarray:
-    """Noise on the velocity entries, drawn once per demo sample, as a noisy sensor at collection time."""
-    noisy = observations.copy()
-    noisy[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(noisy), len(dims)))
-    return noisy
+# Copied from bc_oh.partially_observe
+def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
+    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
+    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    observed = observations.copy()
+    if hide:
+        observed[:, dims] = 0.0
+    else:
+        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    return observed
 
 
 # Copied from bc_oh.stack_history
@@ -360,11 +402,15 @@ class C2FPolicy(nn.Module):
         self.coarse_input, self.policy_input = coarse_input, policy_input
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late")}
+        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "output")}
         policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
         self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
-        self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
-        self.head = nn.Linear(hidden + extra["late"], act_dim)  # the one more linear layer of the paper
+        if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
+            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
+        else:
+            self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
+        self.head = nn.Linear(width + extra["late"] + extra["output"], act_dim)  # the one more linear layer of the paper
 
     def pick(self, x, which: str):
         """The normalised history itself, or its last frame o_t."""
@@ -383,7 +429,7 @@ class C2FPolicy(nn.Module):
         join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
         h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(h, "late"))
+        return zeta, self.head(join(join(h, "late"), "output"))
 
     def forward(self, obs_history):
         return self.coarse_and_final(obs_history)[1]
@@ -509,10 +555,10 @@ def zeta_effect(final, histories: np.ndarray, zeta: np.ndarray, lo: np.ndarray, 
 # Rollouts of each policy in the noisy env
 
 
-def rollout(act, env_id: str, dims: list, std: float, history: int, seed: int) -> dict:
-    """One episode of the deterministic policy on the noisy env: its histories, executed actions,
-    observations (the positions are noise-free) and return."""
-    env = VelocityNoise(gym.make(env_id), dims, std, seed)
+def rollout(act, env_id: str, frame_skip: Optional[int], dims: list, std: float, hide: bool, history: int, seed: int) -> dict:
+    """One episode of the deterministic policy on the partially observed env: its histories, executed
+    actions, observations (the positions are noise-free) and return."""
+    env = PartialObservation(make_env(env_id, frame_skip), dims, std, hide, seed)
     obs, _ = env.reset(seed=seed)
     stacker, record, total, done = HistoryStacker(history), {"histories": [], "actions": [], "observations": []}, 0.0, False
     while not done:
@@ -621,17 +667,19 @@ def run(args):
         raise UsageError(f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}")
     std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix="pass --obs-noise-std for the analysis") if args.obs_noise_std is None else args.obs_noise_std
     dims = velocity_dims(env, args.env, agreed(saved, "velocity_dims", "--velocity-dims"))
+    frame_skip = agreed(saved, "frame_skip", "--frame-skip")  # None (models made before the flag): the env's own
+    hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
 
-    demos = heldout_demos(args, env)
+    demos = heldout_demos(args, env, frame_skip)
     actions, starts = demos["actions"].astype(np.float64), demos["episode_starts"]
     scale = actions.std(0).clip(1e-6)  # the expert's action scale, per dim
     lo, hi = np.quantile(actions, args.zeta_quantile, axis=0), np.quantile(actions, 1 - args.zeta_quantile, axis=0)
-    histories = stack_history(add_obs_noise(demos["observations"], dims, std, args.seed), starts, history)
+    histories = stack_history(partially_observe(demos["observations"], dims, std, hide, args.seed), starts, history)
     steps = np.flatnonzero(~starts)  # steps with a previous action in their episode
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
     actors = {method: as_actor(models[method], low, high) for method in METHODS}
-    rollouts = {method: [rollout(actors[method], args.env, dims, std, history, 1000 * args.seed + i) for i in range(args.episodes)] for method in METHODS}
+    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.episodes)] for method in METHODS}
     changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
     for method in METHODS:
         change, towards = history_intervention(actors[method], histories[steps], obs_dim, actions[steps - 1], scale)

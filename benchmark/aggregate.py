@@ -16,7 +16,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmark.paper import METHOD_NAMES, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, setting_differences
+from benchmark.paper import METHOD_NAMES, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
 
 
@@ -50,11 +50,12 @@ def collect(results_dir: Path, allow_nonpaper: bool):
     for path in sorted(results_dir.glob("*/*/result_seeds*.json")):
         method, env = path.parent.parent.name, path.parent.name
         try:
-            result = read_result(path, method, env)
+            result = read_result(path, script_of(method), env)
         except ResultError as error:
             problems.append(f"left out {path}: {error}")
             continue
-        differences = [] if method == EXPERT else setting_differences(result["args"], paper_settings(env), env)
+        wanted = {**paper_settings(env), **variant_settings(method)}
+        differences = [] if method == EXPERT else setting_differences(result["args"], wanted, env)
         if differences and not allow_nonpaper:
             problems.append(f"left out {path}: not the paper's settings ({', '.join(differences)}); --allow-nonpaper includes it")
             continue

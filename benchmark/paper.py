@@ -1,4 +1,4 @@
-"""The paper's Table 2 and its MuJoCo settings (paper sections 5.1 and 8.3; /work/shared/NOTES.md section 1).
+"""The paper's Table 2 and its MuJoCo settings (paper sections 5.1 and 8.3).
 
 Everything the benchmark knows about the paper lives here, in one place.
 """
@@ -22,6 +22,7 @@ METHOD_NAMES = {
     "bc_so": "BC-SO", "bc_oh": "BC-OH", "c2f": "Coarse-to-fine", "fca": "FCA", "keyframe": "KeyFrame",
     "history_dropout": "History-Dropout", "average_ensemble": "Average-Ensemble", "dagger": "DAgger 8K",
     "expert": "PPO expert",
+    "c2f_output": "C2F (output fusion)",
 }
 """the paper's row names, in the paper's row order"""
 
@@ -34,6 +35,10 @@ def env_family(env_id: str) -> str:
     return env_id.split("-")[0]
 
 
+NATIVE_FRAME_SKIP = {"Hopper": 4, "Walker2d": 4, "HalfCheetah": 5, "Ant": 5}
+"""simulator steps per action of the gymnasium MuJoCo envs (their frame_skip argument, v4 and v5)"""
+
+
 def paper_settings(env_id: str) -> dict:
     """The settings of every Table 2 run, as Args fields of the method scripts."""
     hopper = env_family(env_id) == "Hopper"
@@ -44,24 +49,27 @@ def paper_settings(env_id: str) -> dict:
         "history": 2,
         "learning_rate": 1e-5 if hopper else 1e-4,
         "num_demo_samples": 20000 if hopper else 10000,
+        "frame_skip": NATIVE_FRAME_SKIP.get(env_family(env_id)),
+        "hide_velocities": False,
     }
 
 
-DEFAULTED = ("learning_rate", "num_demo_samples")
+DEFAULTED = ("learning_rate", "num_demo_samples", "frame_skip")
 """fields for which the scripts take None to mean the paper's per-env default"""
 
 
 def setting_differences(args: dict, wanted: dict, env_id: str) -> list:
     """Readable 'name got != wanted' for every field of `wanted` on which a run's args differ.
 
-    None in the run's args stands for the script's default (the paper's value) for DEFAULTED fields.
+    None in the run's args stands for the script's default (the paper's value) for DEFAULTED fields; a
+    field missing from the run's args was made before the flag existed, at what is now its default.
     """
     defaults = paper_settings(env_id)
     differences = []
     for name, want in wanted.items():
         got = args.get(name)
-        if got is None and name in DEFAULTED:
-            got = defaults[name]
+        if (got is None and name in DEFAULTED) or name not in args:
+            got = defaults.get(name)
         if not same_value(got, want):
             differences.append(f"{name} {got} != {want}")
     return differences
@@ -76,3 +84,29 @@ def same_value(a, b) -> bool:
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return len(a) == len(b) and all(same_value(x, y) for x, y in zip(a, b))
     return a == b
+
+
+VARIANTS = {"c2f_output": ("c2f", {"fusion": "output"})}
+"""method name -> (method script, its flags): a method file run with settings that make it another method"""
+
+
+def script_of(method: str) -> str:
+    """The method file (without .py) that runs `method`."""
+    return VARIANTS[method][0] if method in VARIANTS else method
+
+
+def variant_settings(method: str) -> dict:
+    """The Args fields that make `method` out of its script ({} for a plain method file)."""
+    return dict(VARIANTS[method][1]) if method in VARIANTS else {}
+
+
+def as_flags(settings: dict) -> list:
+    """{"fusion": "output", "stop_gradient": False} -> ["--fusion", "output", "--no-stop-gradient"]"""
+    flags = []
+    for name, value in settings.items():
+        flag = name.replace("_", "-")
+        if isinstance(value, bool):
+            flags.append(f"--{flag}" if value else f"--no-{flag}")
+        else:
+            flags += [f"--{flag}", str(value)]
+    return flags

@@ -29,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmark.paper import paper_settings, setting_differences
+from benchmark.paper import VARIANTS, as_flags, paper_settings, script_of, setting_differences, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, make_result, read_result, result_path, run_cli, write_text
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -94,9 +94,11 @@ def parse_options(argv=None) -> Options:
 
 
 def available_methods(scripts_dir: Path) -> list:
-    """Method files are the scripts that declare METHOD = "<their file name>"; plus the expert."""
+    """Method files are the scripts that declare METHOD = "<their file name>"; plus their variants
+    (e.g. c2f_output = c2f.py --fusion output) and the expert."""
     methods = [path.stem for path in sorted(scripts_dir.glob("*.py")) if re.search(rf'^METHOD = "{re.escape(path.stem)}"', path.read_text(), re.M)]
-    return methods + ([EXPERT] if (scripts_dir / "expert_ppo.py").is_file() else [])
+    variants = [name for name in VARIANTS if script_of(name) in methods]
+    return methods + variants + ([EXPERT] if (scripts_dir / "expert_ppo.py").is_file() else [])
 
 
 def check_options(options: Options):
@@ -172,7 +174,7 @@ def wanted_settings(run: Run, options: Options) -> dict:
     if run.method == EXPERT:
         return {"eval_episodes": options.expert_episodes}
     explicit = {name: value for name, value in explicit_settings(options.extra_args).items() if name not in NOT_SETTINGS}
-    return {**paper_settings(run.env), **explicit}
+    return {**paper_settings(run.env), **variant_settings(run.method), **explicit}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -192,8 +194,8 @@ def command(run: Run, options: Options) -> list:
     if run.method == EXPERT:
         return [sys.executable, "expert_ppo.py", "--eval-only", "--env", run.env, "--checkpoint", f"experts/{run.env}.pt",
                 "--eval-episodes", str(options.expert_episodes)]
-    return [sys.executable, f"{run.method}.py", "--env", run.env, "--seeds", str(run.seed), "--output-dir", str(output_dir(run, options)),
-            *options.extra_args, *(["--cuda"] if options.cuda else [])]
+    return [sys.executable, f"{script_of(run.method)}.py", "--env", run.env, "--seeds", str(run.seed), "--output-dir", str(output_dir(run, options)),
+            *as_flags(variant_settings(run.method)), *options.extra_args, *(["--cuda"] if options.cuda else [])]
 
 
 def why_not_done(run: Run, options: Options):
@@ -202,7 +204,7 @@ def why_not_done(run: Run, options: Options):
     if not path.exists():
         return "no result yet"
     try:
-        result = read_result(path, run.method, run.env, [run.seed])
+        result = read_result(path, script_of(run.method), run.env, [run.seed])
     except ResultError as error:
         return f"corrupt result {path}: {error}"
     differences = setting_differences(result["args"], wanted_settings(run, options), run.env)

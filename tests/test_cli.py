@@ -23,7 +23,7 @@ def test_a_bad_command_line_is_one_line_and_exit_2(script, case):
 
 @pytest.mark.parametrize("args, message", [
     (["--epochs", "abc"], "Error parsing --epochs: invalid literal for int() with base 10: 'abc': see --help"),
-    (["--fusion", "sideways"], "invalid choice 'sideways' for argument '--fusion'. Expected one of ('late', 'middle', 'early'): see"),
+    (["--fusion", "sideways"], "invalid choice 'sideways' for argument '--fusion'. Expected one of ('late', 'output', 'middle', 'early'): see"),
     (["--seeds", "1", "two"], "Error parsing --seeds: "),
 ])
 def test_a_bad_flag_value_names_the_flag(args, message):

@@ -21,14 +21,14 @@ POSITIONS = list(range(0, 5))
 
 def test_demo_noise_touches_only_the_velocity_entries():
     observations = np.random.default_rng(0).normal(size=(100, 11))
-    noisy = bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=1)
+    noisy = bc_oh.partially_observe(observations, HOPPER_VELOCITIES, 0.2, False, seed=1)
     assert np.array_equal(noisy[:, POSITIONS], observations[:, POSITIONS])
     difference = noisy[:, HOPPER_VELOCITIES] - observations[:, HOPPER_VELOCITIES]
     assert (difference != 0).all()
     assert difference.std() == pytest.approx(0.2, rel=0.1)
-    assert np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=1), noisy), "not seeded"
-    assert not np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.2, seed=2), noisy)
-    assert np.array_equal(bc_oh.add_obs_noise(observations, HOPPER_VELOCITIES, 0.0, seed=1), observations)
+    assert np.array_equal(bc_oh.partially_observe(observations, HOPPER_VELOCITIES, 0.2, False, seed=1), noisy), "not seeded"
+    assert not np.array_equal(bc_oh.partially_observe(observations, HOPPER_VELOCITIES, 0.2, False, seed=2), noisy)
+    assert np.array_equal(bc_oh.partially_observe(observations, HOPPER_VELOCITIES, 0.0, False, seed=1), observations)
     assert (observations != noisy).any(), "the input array must not be modified in place"
 
 
@@ -44,10 +44,10 @@ def rollout(env, steps=20):
 
 def test_evaluation_noise_touches_only_the_velocity_entries_every_step():
     clean = rollout(gym.make("Hopper-v4"))
-    noisy = rollout(bc_oh.VelocityNoise(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.5, seed=0))
+    noisy = rollout(bc_oh.PartialObservation(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.5, False, seed=0))
     assert np.array_equal(noisy[:, POSITIONS], clean[:, POSITIONS]), "noise must not change the dynamics or positions"
     assert (noisy[:, HOPPER_VELOCITIES] != clean[:, HOPPER_VELOCITIES]).all(), "fresh noise on every velocity, every step"
-    assert np.array_equal(rollout(bc_oh.VelocityNoise(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.0, seed=0)), clean)
+    assert np.array_equal(rollout(bc_oh.PartialObservation(gym.make("Hopper-v4"), HOPPER_VELOCITIES, 0.0, False, seed=0)), clean)
 
 
 def test_velocity_entries_of_v4_and_v5_envs():
@@ -100,8 +100,8 @@ def hopper_expert():
 
 
 def test_demo_generation_is_deterministic():
-    first = bc_oh.generate_demos("Hopper-v4", hopper_expert(), 150)
-    second = bc_oh.generate_demos("Hopper-v4", hopper_expert(), 150)
+    first = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 150)
+    second = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 150)
     for key in ("observations", "actions", "episode_starts"):
         assert np.array_equal(first[key], second[key]), key
     assert first["observations"].shape == (150, 11) and first["actions"].shape == (150, 3)

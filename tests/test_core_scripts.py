@@ -79,7 +79,7 @@ def test_c2f_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
     policy = c2f.make_policy(args, 11, 3, torch.zeros(2, 11 * args.history))
     policy.load_state_dict(checkpoint["state_dict"])  # strict: the args rebuild exactly the saved model
     with np.load(workdir / "demos" / "Hopper-v4_300.npz") as demos:  # the normalisation came with the weights
-        noisy = c2f.add_obs_noise(demos["observations"], list(range(5, 11)), 0.2, seed=1)
+        noisy = c2f.partially_observe(demos["observations"], list(range(5, 11)), 0.2, False, seed=1)
         inputs = c2f.stack_history(noisy, demos["episode_starts"], args.history)
     assert torch.allclose(policy.normalize.mean, torch.as_tensor(inputs.mean(0), dtype=torch.float32), atol=1e-5)
     assert policy(torch.as_tensor(inputs[:5], dtype=torch.float32)).shape == (5, 3)

@@ -1,0 +1,82 @@
+"""The copycat regime map: where does copying the previous action become a shortcut, and does C2F help there?
+
+    python -m benchmark.regimes --regimes fs1_noise native_hidden --seeds 1 2 3 4 5 --workers 2 \
+        [--scripts-dir PATH] [--dry-run]
+
+Each regime is a setting of the shared flags of the method files (control rate, kind of partial
+observability); everything else is the paper's protocol (benchmark.paper.paper_settings). For every regime
+asked for, this runs benchmark.run_grid over METHODS x ENVS x --seeds into results/regimes/<regime>/runs/
+(finished runs are skipped, so an interrupted map resumes), and records in <regime>/runs/commit.txt the
+commit of the scripts that made the runs: a map must be made by one code version.
+"""
+import subprocess
+from pathlib import Path
+
+from benchmark import run_grid
+from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+
+REGIMES = {
+    "native_noise": ([], "native control rate, N(0, 0.2^2) noise on the velocities: the paper's setting (Table 2)"),
+    "fs1_noise": (["--frame-skip", "1"], "frame skip 1 (the FCA authors' MuJoCo rate), N(0, 0.2^2) noise on the velocities"),
+    "native_hidden": (["--hide-velocities"], "native control rate, velocities zeroed (positions only)"),
+    "fs1_hidden": (["--frame-skip", "1", "--hide-velocities"], "frame skip 1, velocities zeroed (the FCA authors' setting)"),
+}
+"""regime name -> (the flags every method file gets, what it is)"""
+METHODS = ["bc_so", "bc_oh", "c2f", "c2f_output"]
+ENVS = ["Hopper-v4", "Walker2d-v4"]
+RESULTS_DIR = Path("results/regimes")
+
+
+def runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
+    return Path(results_dir) / regime / "runs"
+
+
+def scripts_commit(scripts_dir: Path) -> str:
+    """The commit of the scripts folder, refused when its tracked files have changes (not reproducible)."""
+    def git(*words):
+        return subprocess.run(["git", "-C", str(scripts_dir), *words], capture_output=True, text=True)
+    head = git("rev-parse", "HEAD")
+    if head.returncode != 0:
+        raise UsageError(f"{scripts_dir} is not a git checkout: run the map from a checkout (e.g. a git worktree) of a commit")
+    if git("status", "--porcelain", "--untracked-files=no").stdout.strip():
+        raise UsageError(f"{scripts_dir} has uncommitted changes: commit them, or run from a git worktree of a fixed commit")
+    return head.stdout.strip()
+
+
+def record_commit(folder: Path, commit: str):
+    """Write commit.txt, or check that the runs already there were made by the same commit."""
+    path = folder / "commit.txt"
+    if path.is_file() and path.read_text().strip() != commit:
+        raise UsageError(f"{folder} holds runs made by commit {path.read_text().strip()[:12]}, not {commit[:12]}: "
+                         "run from a worktree of that commit (git worktree add ../map <commit>)")
+    if not path.is_file():
+        write_text(path, commit + "\n")
+
+
+def main(argv=None) -> int:
+    parser = OneLineParser(prog="python -m benchmark.regimes", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--regimes", nargs="+", required=True, choices=list(REGIMES), help="regimes to run, in this order")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5], help="training seeds (default 1 2 3 4 5)")
+    parser.add_argument("--methods", nargs="+", default=METHODS, help=f"default: {' '.join(METHODS)}")
+    parser.add_argument("--envs", nargs="+", default=ENVS, help=f"default: {' '.join(ENVS)}")
+    parser.add_argument("--workers", type=int, default=2, help="runs at the same time (default 2)")
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"default: {RESULTS_DIR}")
+    parser.add_argument("--scripts-dir", type=Path, default=run_grid.REPO_ROOT, help="checkout whose scripts run (default: this one)")
+    parser.add_argument("--dry-run", action="store_true", help="list what would run")
+    args = parser.parse_args(argv)
+    commit = scripts_commit(args.scripts_dir)
+    status = 0
+    for regime in args.regimes:
+        folder = runs_dir(regime, args.results_dir).resolve()
+        if not args.dry_run:
+            record_commit(folder, commit)
+        print(f"== {regime}: {REGIMES[regime][1]}", flush=True)
+        grid = ["--methods", *args.methods, "--envs", *args.envs, "--seeds", *map(str, args.seeds), "--workers", str(args.workers),
+                "--results-dir", str(folder), "--scripts-dir", str(args.scripts_dir), *(["--dry-run"] if args.dry_run else [])]
+        flags = REGIMES[regime][0]
+        status = max(status, run_grid.main(grid + ([f"--extra-args={' '.join(flags)}"] if flags else [])))  # one word: argparse takes "--x" for a flag
+    return status
+
+
+if __name__ == "__main__":
+    run_cli(main)
