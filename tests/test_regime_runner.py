@@ -1,0 +1,92 @@
+"""benchmark.regimes and the runner's method variants (c2f_output = c2f.py --fusion output): which
+command runs, which settings a finished run must have, and the one-commit rule of a map."""
+import json
+import subprocess
+
+import pytest
+from conftest import REPO_ROOT
+
+from benchmark import regimes, run_grid
+from benchmark.paper import as_flags, paper_settings, setting_differences
+from benchmark.results import UsageError, make_result, write_text
+
+
+def options(**overrides):
+    settings = dict(methods=["c2f_output"], envs=["Hopper-v4"], seeds=[1], extra_args=["--frame-skip", "1"], scripts_dir=REPO_ROOT)
+    return run_grid.Options(**{**settings, **overrides})
+
+
+def test_a_variant_runs_its_script_with_its_flags():
+    run = run_grid.Run("c2f_output", "Hopper-v4", 1)
+    command = run_grid.command(run, options())
+    assert command[1] == "c2f.py"
+    assert command[command.index("--fusion") + 1] == "output" and command[-2:] == ["--frame-skip", "1"]
+    wanted = run_grid.wanted_settings(run, options())
+    assert (wanted["fusion"], wanted["frame_skip"], wanted["epochs"]) == ("output", 1, 1000)
+    assert "c2f_output" in run_grid.available_methods(REPO_ROOT)
+
+
+def test_as_flags():
+    assert as_flags({"fusion": "output", "stop_gradient": False, "hide_velocities": True}) == [
+        "--fusion", "output", "--no-stop-gradient", "--hide-velocities"]
+
+
+def test_runs_made_before_the_new_flags_count_as_native_and_visible():
+    old = {name: value for name, value in paper_settings("Hopper-v4").items() if name not in ("frame_skip", "hide_velocities")}
+    assert setting_differences(old, paper_settings("Hopper-v4"), "Hopper-v4") == []
+    assert setting_differences({**old, "frame_skip": None}, {"frame_skip": 4}, "Hopper-v4") == []
+    assert setting_differences({**old, "frame_skip": 1}, paper_settings("Hopper-v4"), "Hopper-v4") == ["frame_skip 1 != 4"]
+    assert setting_differences(old, {"hide_velocities": True}, "Hopper-v4") == ["hide_velocities False != True"]
+
+
+@pytest.mark.parametrize("fusion, done", [("output", True), ("late", False)])
+def test_a_variant_result_is_the_scripts_result_with_the_variant_settings(tmp_path, fusion, done):
+    run = run_grid.Run("c2f_output", "Hopper-v4", 1)
+    args = {"env": "Hopper-v4", "seeds": [1], **paper_settings("Hopper-v4"), "frame_skip": 1, "fusion": fusion}
+    result = make_result("Hopper-v4", "c2f", args, {1: [[1, 5.0], [2, 6.0], [3, 7.0]]})  # c2f.py names itself c2f
+    write_text(tmp_path / "c2f_output" / "Hopper-v4" / "result_seeds1.json", json.dumps(result))
+    reason = run_grid.why_not_done(run, options(results_dir=tmp_path))
+    assert (reason is None) == done
+    if not done:
+        assert "fusion late != output" in reason
+
+
+def git(folder, *words):
+    subprocess.run(["git", "-C", str(folder), *words], check=True, capture_output=True)
+
+
+@pytest.fixture
+def checkout(tmp_path):
+    """A git checkout with a stand-in method file bc_so.py and an expert for Hopper-v4."""
+    folder = tmp_path / "checkout"
+    (folder / "experts").mkdir(parents=True)
+    (folder / "bc_so.py").write_text('METHOD = "bc_so"\n')
+    (folder / "experts" / "Hopper-v4.pt").write_bytes(b"")
+    git(folder, "init", "-q")
+    git(folder, "add", ".")
+    git(folder, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "one")
+    return folder
+
+
+def test_a_map_is_made_by_one_commit(checkout, tmp_path):
+    commit = regimes.scripts_commit(checkout)
+    assert len(commit) == 40
+    folder = tmp_path / "runs"
+    regimes.record_commit(folder, commit)
+    regimes.record_commit(folder, commit)  # the same commit again: fine
+    assert (folder / "commit.txt").read_text().strip() == commit
+    with pytest.raises(UsageError, match="run from a worktree of that commit"):
+        regimes.record_commit(folder, "f" * 40)
+    (checkout / "bc_so.py").write_text('METHOD = "bc_so"\nchanged = 1\n')
+    with pytest.raises(UsageError, match="uncommitted changes"):
+        regimes.scripts_commit(checkout)
+
+
+def test_the_regime_flags_reach_every_run(checkout, tmp_path, capsys):
+    status = regimes.main(["--regimes", "fs1_hidden", "--methods", "bc_so", "--envs", "Hopper-v4", "--seeds", "1", "2",
+                           "--scripts-dir", str(checkout), "--results-dir", str(tmp_path / "map"), "--dry-run"])
+    out = capsys.readouterr().out
+    assert status == 0
+    runs = [line for line in out.splitlines() if line.startswith("run ")]
+    assert len(runs) == 2 and all(line.endswith("--frame-skip 1 --hide-velocities)") for line in runs)
+    assert str(tmp_path / "map" / "fs1_hidden" / "runs" / "bc_so" / "Hopper-v4") in runs[0]

@@ -1,0 +1,197 @@
+"""The shared setting of the copycat regime map (bc_oh.py holds the originals): the control rate
+(--frame-skip), positions-only observations (--hide-velocities), the copy-error line, demo caches per
+rate; and C2F's output fusion (--fusion output)."""
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import bc_oh
+import c2f
+from conftest import REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_script, tiny_args
+
+HOPPER_VELOCITIES = list(range(5, 11))
+POSITIONS = list(range(0, 5))
+
+
+# ----------------------------------------------------------------------------------------------
+# --frame-skip
+
+
+def step_once(env, action):
+    env.reset(seed=3)
+    start = env.unwrapped.data.time
+    reward = env.step(action)[1]
+    return reward, env.unwrapped.data.time - start
+
+
+def test_frame_skip_one_keeps_simulated_time_and_return_scale():
+    native, fast = bc_oh.make_env("Hopper-v4"), bc_oh.make_env("Hopper-v4", 1)
+    assert (native.spec.max_episode_steps, native.unwrapped.frame_skip) == (1000, 4)
+    assert (fast.spec.max_episode_steps, fast.unwrapped.frame_skip) == (4000, 1)  # 1000 x 4 / 1 steps: the same 8 s
+    assert fast.unwrapped.dt == pytest.approx(0.002) and native.unwrapped.dt == pytest.approx(0.008)
+    action = np.array([0.3, -0.2, 0.5])
+    raw = gym.make("Hopper-v4")
+    raw.unwrapped.frame_skip = 1  # the same simulator step, reward not rescaled
+    (fast_reward, fast_time), (raw_reward, _) = step_once(fast, action), step_once(raw, action)
+    assert fast_reward == pytest.approx(raw_reward / 4)  # every reward x frame_skip / native
+    assert fast_time == pytest.approx(0.002) and step_once(native, action)[1] == pytest.approx(0.008)
+    assert bc_oh.make_env("HalfCheetah-v4", 1).spec.max_episode_steps == 5000  # native 5
+
+
+def test_frame_skip_one_episode_return_matches_the_native_scale():
+    """Holding each action for four fast steps replays the native episode: the returns agree."""
+    actions = np.random.default_rng(0).uniform(-0.3, 0.3, (30, 3))
+    native, fast = bc_oh.make_env("Hopper-v4"), bc_oh.make_env("Hopper-v4", 1)
+    native.reset(seed=5), fast.reset(seed=5)
+    native_return = sum(native.step(a)[1] for a in actions)
+    fast_return = sum(fast.step(a)[1] for a in actions for _ in range(4))
+    assert fast_return == pytest.approx(native_return, rel=1e-6)
+
+
+def test_default_and_native_frame_skip_are_the_plain_env():
+    for frame_skip in (None, 4):
+        env = bc_oh.make_env("Hopper-v4", frame_skip)
+        assert not isinstance(env, gym.wrappers.TransformReward) and env.spec.max_episode_steps == 1000
+
+
+def test_frame_skip_needs_a_mujoco_env_and_a_positive_value(tmp_path):
+    with pytest.raises(bc_oh.UsageError, match="not a MuJoCo env"):
+        bc_oh.make_env("Pendulum-v1", 1)
+    assert_usage_error(run_script("bc_oh.py", "--frame-skip", "0", cwd=tmp_path), "--frame-skip must be positive")
+
+
+# ----------------------------------------------------------------------------------------------
+# --hide-velocities
+
+
+def test_hidden_velocities_are_zero_in_the_demos_and_nothing_else_changes():
+    observations = np.random.default_rng(0).normal(size=(100, 11))
+    hidden = bc_oh.partially_observe(observations, HOPPER_VELOCITIES, 0.2, True, seed=1)
+    assert (hidden[:, HOPPER_VELOCITIES] == 0).all()
+    assert np.array_equal(hidden[:, POSITIONS], observations[:, POSITIONS])
+    assert (observations[:, HOPPER_VELOCITIES] != 0).all(), "the clean demos are not modified"
+
+
+def test_hidden_velocities_are_zero_at_evaluation_every_step(monkeypatch):
+    """evaluate() feeds the policy histories whose velocity entries are zero in every frame, while the
+    positions move: the env itself is untouched."""
+    seen = []
+
+    class Recorder(torch.nn.Module):
+        def forward(self, inputs):
+            seen.append(inputs.numpy().copy())
+            return torch.full((len(inputs), 3), 0.1)
+
+    args = tiny_args(bc_oh, hide_velocities=True, frame_skip=1)
+    bc_oh.evaluate(Recorder(), args, episodes=2, seed=0, device=torch.device("cpu"))
+    frames = np.concatenate(seen).reshape(-1, 2, 11)  # history 2, oldest first
+    assert len(seen) > 10
+    assert (frames[:, :, HOPPER_VELOCITIES] == 0).all()
+    assert frames[:, :, POSITIONS].std(0).min() > 0
+
+
+def test_hidden_velocities_train_on_zeroed_velocities(monkeypatch):
+    """The normaliser saw zero velocities (mean 0) and real positions: train_seed hid them."""
+    monkeypatch.setattr(bc_oh, "evaluate", lambda policy, args, episodes, seed, device: [0.0])
+    demos = fake_demos()
+    result = bc_oh.train_seed(tiny_args(bc_oh, hide_velocities=True), demos, 1, torch.device("cpu"))
+    mean = result["policy"].normalize.mean.reshape(2, 11)
+    assert (mean[:, HOPPER_VELOCITIES] == 0).all() and (mean[:, POSITIONS] != 0).all()
+
+
+# ----------------------------------------------------------------------------------------------
+# The copy error of the demos
+
+
+def test_copy_error_against_hand_computed_values():
+    actions = np.array([[0.0], [1.0], [2.0]])
+    # steps 0->1 and 1->2 both differ by 1: MSE 1; Var([0, 1, 2]) = 2/3
+    assert bc_oh.copy_error(actions, np.array([True, False, False])) == pytest.approx(1.5)
+    # a new episode at row 2: only the pair (0, 1) counts, still MSE 1
+    assert bc_oh.copy_error(actions, np.array([True, False, True])) == pytest.approx(1.5)
+    two_dims = np.array([[0.0, 5.0], [1.0, 5.0], [0.0, 7.0], [1.0, 7.0]])  # dim 0: MSE 1 / Var 0.25; dim 1: 4/3 / 1
+    assert bc_oh.copy_error(two_dims, np.array([True, False, False, False])) == pytest.approx((4 + 4 / 3) / 2)
+
+
+# ----------------------------------------------------------------------------------------------
+# Demo caches per rate
+
+
+def cache_args(**overrides):
+    return tiny_args(bc_oh, num_demo_samples=120, expert=str(REPO_ROOT / "experts" / "{env}.pt"), **overrides)
+
+
+def test_demo_cache_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    env = bc_oh.make_env("Hopper-v4")
+    fast = bc_oh.load_or_generate_demos(cache_args(frame_skip=1), env)
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("demos:"))
+    assert f"copy error MSE(a_t-1, a_t)/Var(a) = {bc_oh.copy_error(fast['actions'], fast['episode_starts']):.3f}" in line
+    with np.load(tmp_path / "demos" / "Hopper-v4_fs1_120.npz") as saved:
+        assert json.loads(str(saved["meta"]))["frame_skip"] == 1
+    native = bc_oh.load_or_generate_demos(cache_args(), env)
+    assert (tmp_path / "demos" / "Hopper-v4_120.npz").is_file()
+    assert not np.array_equal(native["observations"], fast["observations"])
+    assert bc_oh.copy_error(fast["actions"], fast["episode_starts"]) < bc_oh.copy_error(native["actions"], native["episode_starts"])
+
+
+def test_a_cache_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    env = bc_oh.make_env("Hopper-v4")
+    fast = bc_oh.load_or_generate_demos(cache_args(frame_skip=1), env)
+    # the native cache path holding demos recorded at frame skip 1 is rolled out again
+    (tmp_path / "demos" / "Hopper-v4_fs1_120.npz").rename(tmp_path / "demos" / "Hopper-v4_120.npz")
+    native = bc_oh.load_or_generate_demos(cache_args(), env)
+    assert not np.array_equal(native["observations"], fast["observations"])
+    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
+        assert json.loads(str(saved["meta"]))["frame_skip"] == 4
+
+
+def test_demos_of_another_rate_are_refused(tmp_path):
+    link_experts(tmp_path)
+    made = run_script("bc_oh.py", "--frame-skip", "1", "--num-demo-samples", 120, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
+                      "--seeds", 1, "--output-dir", tmp_path / "out", cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    result = run_script("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1, cwd=tmp_path)
+    assert_usage_error(result, "recorded at frame skip 1, this run is at 4")
+    summary = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
+    assert (summary["args"]["frame_skip"], summary["args"]["hide_velocities"]) == (1, False)
+
+
+# ----------------------------------------------------------------------------------------------
+# C2F: output fusion
+
+
+def c2f_policy(**options):
+    return c2f.Policy(11, 3, 2, 32, torch.randn(50, 22), **options)
+
+
+def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():
+    policy = c2f_policy(fusion="output")
+    assert policy.policy_rest[-1].out_features == 3, "the policy MLP outputs an action-sized vector"
+    assert policy.head.in_features == 2 * 3, "the last layer sees exactly [policy output, sg(zeta)]"
+    inputs = torch.randn(7, 22)
+    zeta, action = policy.coarse_and_final(inputs)
+    assert zeta.shape == action.shape == (7, 3)
+    policy_output = policy.policy_rest(policy.policy_first(policy.normalize(inputs)))
+    expected = policy.head(torch.cat([policy_output, zeta], dim=1))
+    assert torch.allclose(action, expected)
+
+
+@pytest.mark.parametrize("stop_gradient", [True, False])
+def test_output_fusion_stop_gradient(stop_gradient):
+    policy = c2f_policy(fusion="output", stop_gradient=stop_gradient)
+    action = policy.coarse_and_final(torch.randn(7, 22))[1]
+    action.pow(2).mean().backward()  # the final loss alone
+    coarse_gradient = sum(p.grad.abs().sum() for p in policy.coarse.parameters() if p.grad is not None)
+    assert (coarse_gradient == 0) == stop_gradient
+    assert policy.head.weight.grad.abs().sum() > 0 and policy.policy_first[0].weight.grad.abs().sum() > 0
+
+
+def test_late_fusion_default_is_unchanged():
+    """The default (late) policy MLP keeps its hidden feature: head sees hidden + action dims."""
+    policy = c2f_policy()
+    assert policy.head.in_features == 32 + 3 and isinstance(policy.policy_rest[-1], torch.nn.ReLU)
