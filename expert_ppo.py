@@ -4,10 +4,11 @@
 Train:     python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
 Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
+Other rate: python expert_ppo.py --env Hopper-v4 --frame-skip 1   (writes runs/expert_ppo/Hopper-v4__1_fs1)
 
 The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_only=True) reads it):
-the actor, the frozen observation-normalisation statistics, the action bounds, env id, shapes, args,
-step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
+the actor, the frozen observation-normalisation statistics, the action bounds, env id, frame skip, shapes,
+args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
 """
 import contextlib
 import io
@@ -36,6 +37,8 @@ mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message el
 class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id with continuous actions (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    frame_skip: Optional[int] = None
+    """simulator steps per action (default: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant); episodes and rewards are rescaled to the same simulated time and return scale"""
     seed: int = 1
     """seed of the run (python, numpy, torch and the envs)"""
     total_timesteps: int = 3_000_000
@@ -64,8 +67,8 @@ class Args:
     """gradient-norm clipping"""
     hidden: int = 64
     """width of the two tanh hidden layers of actor and critic"""
-    run_dir: str = "runs/expert_ppo/{env}__{seed}"
-    """where training writes latest.pt (to resume) and best.pt (best periodic evaluation)"""
+    run_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
+    """where training writes latest.pt (to resume) and best.pt (best periodic evaluation); {rate} is empty at the env's own frame skip and _fsK at --frame-skip K, so runs at other rates do not overwrite it"""
     save_every: int = 100_000
     """write latest.pt every this many env steps"""
     eval_every: int = 250_000
@@ -81,7 +84,7 @@ class Args:
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """checkpoint evaluated by --eval-only"""
+    """checkpoint evaluated by --eval-only, at the frame skip it was trained at unless --frame-skip is given"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: Optional[str] = None
@@ -96,15 +99,37 @@ class UsageError(Exception):
 # Env
 
 
-def check_env(env_id: str) -> gym.Env:
-    """Make one env, failing with a clear message for unknown ids and discrete action spaces."""
+# Copied from bc_oh.make_env
+def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
+    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
+    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: PPO here needs continuous (Box) actions")
-    return env
+        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+
+
+def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[int]:
+    """The frame skip of the envs make_env(env_id, frame_skip) makes: frame_skip, or the env's own when None
+    (None for an env that is not MuJoCo). Makes one such env, so that bad input (unknown id, discrete
+    actions, a frame skip the env cannot take) fails here with one line, before any work is done."""
+    if frame_skip is not None and frame_skip <= 0:  # make_env would divide by it, or make a negative time limit
+        raise UsageError(f"--frame-skip must be positive, got {frame_skip}: e.g. 1, or leave it out for the env's own")
+    env = make_env(env_id, frame_skip)
+    resolved = getattr(env.unwrapped, "frame_skip", None)  # make_env set it to frame_skip when one was given
+    env.close()
+    return resolved
 
 
 class RunningMeanStd:
@@ -207,6 +232,7 @@ def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, 
     return {
         "format": "copycat-suite/expert-ppo/1",
         "env_id": args.env,
+        "frame_skip": args.frame_skip,  # the rate the policy was trained at (train resolves None to the env's own)
         "obs_shape": list(env.single_observation_space.shape),
         "action_shape": list(env.single_action_space.shape),
         "hidden": args.hidden,
@@ -233,9 +259,9 @@ def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, 
 # Evaluation
 
 
-def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int) -> list:
+def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_skip: Optional[int] = None) -> list:
     """Returns of `episodes` episodes of the deterministic policy, one env, seeds seed, seed+1, ..."""
-    env, returns = gym.make(env_id), []
+    env, returns = make_env(env_id, frame_skip), []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
         done, total = False, 0.0
@@ -250,15 +276,25 @@ def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int) -> lis
 
 def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
-    check_env(args.env).close()
+    native = env_frame_skip(args.env)
+    if args.frame_skip is not None:
+        env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.eval_episodes <= 0:
         raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
-    policy = load_expert(path, args.env)
-    returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000)
+    policy = load_expert(path, args.env)  # load_expert checked that the file is a readable checkpoint
+    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    # A policy acts well at the rate it was trained at: evaluate there unless told otherwise. Checkpoints
+    # written before frame skips were recorded were all trained at the env's own.
+    trained_at = checkpoint.get("frame_skip", native)
+    frame_skip = args.frame_skip or trained_at
+    if args.ship_to and frame_skip != trained_at:  # the shipped return must be the one of the expert's own rate
+        raise UsageError(f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, drop --frame-skip {frame_skip} or --ship-to")
+    if frame_skip != native:  # said only at another rate, so that the default output stays as it was
+        print(f"evaluating at frame skip {frame_skip} (the env's own is {native}; the checkpoint was trained at {trained_at})")
+    returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
     if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         checkpoint.update(eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns))
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
@@ -284,8 +320,12 @@ def validate(args: Args):
 
 def train(args: Args):
     validate(args)
-    check_env(args.env).close()
-    run_dir = args.run_dir.format(env=args.env, seed=args.seed)
+    native = env_frame_skip(args.env)
+    # Resolved before anything is made, so the run's args and checkpoints record the rate actually used;
+    # make_env(env, native) is the plain gym.make(env), so the default run is the same as before the flag.
+    args.frame_skip = env_frame_skip(args.env, args.frame_skip)
+    rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
+    run_dir = args.run_dir.format(env=args.env, seed=args.seed, rate=rate)
     latest_path, best_path = os.path.join(run_dir, "latest.pt"), os.path.join(run_dir, "best.pt")
     random.seed(args.seed)
     np.random.seed(args.seed)
@@ -296,7 +336,7 @@ def train(args: Args):
     # observation in info["final_obs"]; so every stored transition belongs to one episode, and a
     # truncated episode can be bootstrapped from V(final_obs).
     envs = gym.vector.SyncVectorEnv(
-        [lambda: gym.make(args.env) for _ in range(args.num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
+        [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
     )
     obs_dim, act_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = Agent(obs_dim, act_dim, args.hidden)
@@ -312,6 +352,10 @@ def train(args: Args):
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
         if trained_on != args.env:
             raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --run-dir")
+        # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
+        trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
+        if trained_at != args.frame_skip:
+            raise UsageError(f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --run-dir")
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
@@ -409,7 +453,7 @@ def train(args: Args):
         print(f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
         if global_step >= next_eval:
             next_eval += args.eval_every
-            eval_return = float(np.mean(evaluate(frozen_policy(), args.env, args.train_eval_episodes, seed=args.seed + global_step)))
+            eval_return = float(np.mean(evaluate(frozen_policy(), args.env, args.train_eval_episodes, seed=args.seed + global_step, frame_skip=args.frame_skip)))
             print(f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True)
             if eval_return > best_return:
                 best_return = eval_return
@@ -426,7 +470,7 @@ def train(args: Args):
     if stopped_early:
         print(f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume")
         return
-    returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000)
+    returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip)
     save_atomically(checkpoint(float(np.mean(returns))), latest_path)
     print(f"wrote {latest_path} (last) and {best_path} (best periodic evaluation, {best_return:.1f})")
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")

@@ -121,7 +121,7 @@ def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, 
         "",
         "Ours: mean ± std over seeds (population std), n = seeds in the cell; a seed's score is the mean return of "
         "its last three evaluations, as the paper reports. Paper: its Table 2, mean ± std over three seeds (as "
-        "transcribed in NOTES.md section 1). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
+        "transcribed from the paper). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
         "evaluation episodes (ep.), on the clean env; the paper gives no std for it.",
         "",
         f"Settings (the paper's): {settings_text()}.",
@@ -176,21 +176,21 @@ def plot(records: list, path: Path):
 README_START, README_END = "<!-- table2 -->", "<!-- /table2 -->"
 
 
-def readme_parts(readme: Path) -> tuple:
-    """The README's text up to its table2 start marker, and from its end marker on."""
+def readme_parts(readme: Path, start=README_START, end=README_END) -> tuple:
+    """The README's text up to its start marker, and from its end marker on."""
     if not readme.is_file():
         raise UsageError(f"README {readme} not found: check the --readme path")
     text = readme.read_text()
-    if text.count(README_START) != 1 or text.count(README_END) != 1 or text.index(README_START) > text.index(README_END):
-        raise UsageError(f"{readme} needs one {README_START} line and, after it, one {README_END} line: add them where the table goes")
-    return text[:text.index(README_START) + len(README_START)], text[text.index(README_END):]
+    if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
+        raise UsageError(f"{readme} needs one {start} line and, after it, one {end} line: add them where the table goes")
+    return text[:text.index(start) + len(start)], text[text.index(end):]
 
 
-def update_readme(readme: Path, table: str, image: Path):
-    """Put the table (without its title) and the plot between the README's table2 markers; keep the rest."""
-    before, after = readme_parts(readme)
-    body = table.split("\n", 2)[2].strip()  # below the "# Table 2" title and its blank line
-    write_text(readme, f"{before}\n{body}\n\n![Table 2]({os.path.relpath(image, readme.parent)})\n{after}")
+def update_readme(readme: Path, table: str, image: Path, start=README_START, end=README_END, title="Table 2"):
+    """Put the table (without its title) and the plot between the README's markers; keep the rest."""
+    before, after = readme_parts(readme, start, end)
+    body = table.split("\n", 2)[2].strip()  # below the "# ..." title and its blank line
+    write_text(readme, f"{before}\n{body}\n\n![{title}]({os.path.relpath(image, readme.parent)})\n{after}")
 
 
 def main(argv=None) -> int:

@@ -2,6 +2,7 @@
 import re
 import shutil
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -115,8 +116,12 @@ def test_shipped_expert_scores_well():
         (["--env", "Walker2d-v4", "--eval-only", "--checkpoint", "{tiny}"], "is an expert for Hopper-v4, not Walker2d-v4"),
         (["--total-timesteps", 0], "--total-timesteps must be positive"),
         (["--learning-rate", 0], "--learning-rate must be positive"),
+        (["--frame-skip", 0], "--frame-skip must be positive"),
+        (["--env", "Pendulum-v1", "--frame-skip", 2], "is not a MuJoCo env"),
+        (["--eval-only", "--checkpoint", "{tiny}", "--frame-skip", 1, "--ship-to", "x.pt"], "was trained at frame skip 4"),
     ],
-    ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr"],
+    ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
+         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
@@ -151,3 +156,86 @@ def test_interrupted_save_keeps_the_old_checkpoint(interrupted_save):
 
 def test_interrupted_save_leaves_no_tmp_file(interrupted_save):
     assert not list(interrupted_save.parent.glob("*.tmp*"))
+
+
+# ----------------------------------------------------------------------------------------------
+# --frame-skip
+
+
+class CountSteps(gym.Wrapper):
+    """A pass-through wrapper that counts the steps taken, to tell the envs a run used from mere checks."""
+
+    steps = 0
+
+    def step(self, action):
+        self.steps += 1
+        return super().step(action)
+
+
+@pytest.fixture(scope="module")
+def fs1_run(tmp_path_factory):
+    """A tiny Hopper-v4 training run at --frame-skip 1 (1024 steps, in process), with every env it made
+    (wrapped in CountSteps): (run dir, envs, checkpoint, final evaluation's return)."""
+    run_dir, made = tmp_path_factory.mktemp("fs1_run"), []
+    make_env = expert_ppo.make_env
+
+    def counting_make_env(env_id, frame_skip=None):
+        made.append(CountSteps(make_env(env_id, frame_skip)))
+        return made[-1]
+
+    args = expert_ppo.Args(env="Hopper-v4", frame_skip=1, total_timesteps=1024, num_envs=2, num_steps=512, num_minibatches=4,
+                           update_epochs=1, eval_every=2048, save_every=2048, train_eval_episodes=1, eval_episodes=1, run_dir=str(run_dir))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(expert_ppo, "make_env", counting_make_env)
+        expert_ppo.train(args)
+    state = load(run_dir / "latest.pt")
+    return run_dir, made, state
+
+
+def test_default_records_the_native_frame_skip(checkpoint):
+    state = load(checkpoint)
+    assert state["frame_skip"] == 4 and state["args"]["frame_skip"] == 4  # Hopper's own
+
+
+def test_frame_skip_1_trains_and_evaluates_at_that_rate(fs1_run):
+    _, made, state = fs1_run
+    stepped = [env for env in made if env.steps]
+    assert len(stepped) >= 3  # the 2 training envs and the final evaluation's
+    for env in stepped:  # 4x the steps of 0.002 s: the same 8 s of simulated time as 1000 native steps
+        assert env.spec.max_episode_steps == 4000
+        assert env.unwrapped.frame_skip == 1 and env.unwrapped.dt == pytest.approx(0.002)
+    assert state["frame_skip"] == 1 and state["args"]["frame_skip"] == 1
+    assert state["global_step"] == 1024
+
+
+def test_frame_skip_1_scales_rewards_by_a_quarter():
+    env = expert_ppo.make_env("Hopper-v4", 1)
+    raw = gym.make("Hopper-v4")
+    raw.unwrapped.frame_skip = 1  # the same dynamics, rewards not rescaled
+    (obs, _), (raw_obs, _) = env.reset(seed=3), raw.reset(seed=3)
+    np.testing.assert_array_equal(obs, raw_obs)
+    for action in np.random.default_rng(0).uniform(-1, 1, (5, 3)):
+        obs, reward, *_ = env.step(action)
+        raw_obs, raw_reward, *_ = raw.step(action)
+        np.testing.assert_array_equal(obs, raw_obs)
+        assert reward == pytest.approx(raw_reward / 4, rel=1e-12)
+    assert expert_ppo.make_env("Hopper-v4", 4).spec.max_episode_steps == 1000  # the native rate is the plain env
+
+
+def test_eval_only_uses_the_recorded_frame_skip(fs1_run, capsys):
+    # the final evaluation of training and --eval-only both use seeds 10000, ...: same rate, same return
+    run_dir, _, state = fs1_run
+    expert_ppo.eval_only(expert_ppo.Args(env="Hopper-v4", eval_only=True, checkpoint=str(run_dir / "latest.pt"), eval_episodes=1))
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("evaluating at frame skip 1 ")
+    assert float(SUMMARY.match(lines[-1]).group(1)) == pytest.approx(state["eval_return"], abs=0.05)
+
+
+def test_resume_at_another_frame_skip_is_refused(tiny_run, tmp_path):
+    run_dir = tmp_path / "run"
+    shutil.copytree(tiny_run[0], run_dir)
+    before = (run_dir / "latest.pt").read_bytes()
+    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--run-dir", run_dir, "--resume", "--frame-skip", 1)
+    assert_usage_error(result, "was trained at frame skip 4, not 1")
+    assert result.returncode == 2
+    assert (run_dir / "latest.pt").read_bytes() == before

@@ -1,0 +1,183 @@
+"""benchmark/stats.py against hand-computed figures, and benchmark/regime_summary.py on a small synthetic regime map."""
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import REPO_ROOT, assert_usage_error
+from test_benchmark import plant
+
+from benchmark import regime_summary
+from benchmark.regimes import runs_dir
+from benchmark.results import make_result, result_path
+from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
+
+# ----------------------------------------------------------------------------------------------
+# Statistics
+
+
+def test_bootstrap_interval_of_identical_scores_or_one_score_is_a_point():
+    assert bootstrap_ci([7.0] * 5) == (7.0, 7.0)
+    assert bootstrap_ci([3.3]) == (3.3, 3.3)
+
+
+def test_bootstrap_interval_holds_the_mean_within_the_scores_and_is_deterministic():
+    scores = [1.0, 2.0, 3.0, 10.0, 4.0]
+    low, high = bootstrap_ci(scores)
+    assert 1.0 <= low < 4.0 < high <= 10.0  # mean 4
+    assert bootstrap_ci(scores) == (low, high)  # the same seed draws the same resamples
+
+
+def test_bootstrap_interval_of_two_scores_by_hand():
+    # resampled means of [0, 1]: 0 (1/4), 0.5 (1/2), 1 (1/4): the 2.5% and 97.5% tails land on 0 and 1, the 30% and 70% on 0.5
+    assert bootstrap_ci([0.0, 1.0]) == (0.0, 1.0)
+    assert bootstrap_ci([0.0, 1.0], confidence=0.4) == (0.5, 0.5)
+
+
+@pytest.mark.parametrize("x, y, expected", [
+    ([1, 2, 3], [2, 2, 2], (0 * 3 + 0.5 * 3 + 1 * 3) / 9),  # 0.5
+    ([3, 4], [1, 2, 3], 5.5 / 6),  # 3 beats 1 and 2 and ties 3; 4 beats all three
+    ([5, 6], [1, 2], 1.0),
+    ([1, 2], [5, 6], 0.0),
+    ([2, 2], [2, 2, 2], 0.5),
+])
+def test_probability_of_improvement_by_hand(x, y, expected):
+    assert probability_of_improvement(x, y) == pytest.approx(expected)
+    assert probability_of_improvement(y, x) == pytest.approx(1 - expected)
+
+
+def test_probability_of_improvement_interval_by_hand():
+    assert probability_of_improvement_ci([5, 6], [1, 2]) == (1.0, 1.0)  # every resample: every x above every y
+    # x resampled from [0, 1] against y = 0.5: P = 0 (1/4), 0.5 (1/2), 1 (1/4)
+    assert probability_of_improvement_ci([0, 1], [0.5]) == (0.0, 1.0)
+    assert probability_of_improvement_ci([0, 1], [0.5], confidence=0.4) == (0.5, 0.5)
+    assert probability_of_improvement_ci([1, 4, 2], [3, 0]) == probability_of_improvement_ci([1, 4, 2], [3, 0])
+
+
+def test_expert_normalised():
+    assert expert_normalised(300.0, 1000.0) == pytest.approx(0.3)
+
+
+# ----------------------------------------------------------------------------------------------
+# The summary CLI
+
+
+def plant_expert(runs, env, score):
+    path = result_path(runs, "expert", env, [0])
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(make_result(env, "expert", {"env": env, "seeds": [0], "eval_episodes": 20}, {0: [[0, score]]})))
+
+
+def plant_variant(runs, method, script, env, seed, returns, **settings):
+    """plant() for a method variant: its script's result (method "c2f") in the variant's folder (c2f_output)."""
+    path = result_path(runs, method, env, [seed])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return plant(runs.parent / "staging", script, env, seed, returns, **settings).replace(path)
+
+
+@pytest.fixture
+def regime_map(tmp_path):
+    """native_noise: Hopper BC-SO 100, 300; BC-OH 200, 400; C2F 500, 700; C2F output 600 (and seed 2 without
+    --fusion output); Walker2d BC-OH 80. fs1_noise: Hopper BC-OH 50 (and seed 2 at the native rate, and a corrupt
+    seed 3 of BC-SO). Experts: Hopper 1000, Walker2d 400."""
+    results, experts = tmp_path / "results" / "regimes", tmp_path / "runs"
+    native, fs1 = runs_dir("native_noise", results), runs_dir("fs1_noise", results)
+    for method, scores in (("bc_so", (100, 300)), ("bc_oh", (200, 400)), ("c2f", (500, 700))):
+        for seed, score in enumerate(scores, 1):
+            plant(native, method, "Hopper-v4", seed, [0.0, score - 10.0, score, score + 10.0])  # the first evaluation drops out
+    plant_variant(native, "c2f_output", "c2f", "Hopper-v4", 1, [600.0] * 3, fusion="output")
+    plant(native, "bc_oh", "Walker2d-v4", 1, [80.0] * 3)
+    plant(fs1, "bc_oh", "Hopper-v4", 1, [50.0] * 3, frame_skip=1)
+    problems = [
+        f"left out {plant_variant(native, 'c2f_output', 'c2f', 'Hopper-v4', 2, [9.0] * 3)}: not the native_noise settings (fusion None != output)",
+        f"left out {plant(fs1, 'bc_oh', 'Hopper-v4', 2, [9.0] * 3)}: not the fs1_noise settings (frame_skip 4 != 1)",
+        f"left out {result_path(fs1, 'bc_so', 'Hopper-v4', [3])}: unreadable JSON",
+    ]
+    result_path(fs1, "bc_so", "Hopper-v4", [3]).parent.mkdir(parents=True)
+    result_path(fs1, "bc_so", "Hopper-v4", [3]).write_text("{not json")
+    plant_expert(experts, "Hopper-v4", 1000.0)
+    plant_expert(experts, "Walker2d-v4", 400.0)
+    return results, experts, problems
+
+
+def summarise(results, experts, *args):
+    return regime_summary.main(["--results-dir", str(results), "--expert-runs", str(experts), *map(str, args)])
+
+
+def test_summary_numbers_files_and_left_out_runs(regime_map, capsys):
+    results, experts, problems = regime_map
+    assert summarise(results, experts) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3 and all(any(line.startswith(problem) for line in err) for problem in problems), err
+    assert (results / "native_noise" / "mujoco.csv").read_text().splitlines() == [
+        "env,method,seed,score",
+        "Hopper-v4,bc_so,1,100.000", "Hopper-v4,bc_so,2,300.000", "Hopper-v4,bc_oh,1,200.000", "Hopper-v4,bc_oh,2,400.000",
+        "Hopper-v4,c2f,1,500.000", "Hopper-v4,c2f,2,700.000", "Hopper-v4,c2f_output,1,600.000", "Walker2d-v4,bc_oh,1,80.000"]
+    assert (results / "fs1_noise" / "mujoco.csv").read_text() == "env,method,seed,score\nHopper-v4,bc_oh,1,50.000\n"
+    summary = (results / "summary.md").read_text()
+    assert summary.index("**native_noise**") < summary.index("**fs1_noise**") and "native_hidden" not in summary
+    assert f"--results-dir {results} --expert-runs {experts}` from 9 per-seed results" in summary
+    # mean, interval of the resampled means (200, 300 or 400), seeds, mean / expert 1000
+    assert "| Hopper-v4 | BC-OH | 300 | [200, 400] | n=2, incomplete | 0.30 |" in summary
+    assert "| Hopper-v4 | C2F (output fusion) | 600 | [600, 600] | n=1, incomplete | 0.60 |" in summary
+    assert "| Walker2d-v4 | BC-OH | 80 | [80, 80] | n=1, incomplete | 0.20 |" in summary
+    assert "| Hopper-v4 | BC-OH | 50 | [50, 50] | n=1, incomplete | 0.05 |" in summary  # fs1_noise
+    assert "| Hopper-v4 | P(Coarse-to-fine > BC-OH) | 1.00 | [1.00, 1.00] | n=2 vs 2, incomplete | undecided (fewer than 5 seeds) |" in summary
+    assert "| Hopper-v4 | P(C2F (output fusion) > BC-OH) | 1.00 | [1.00, 1.00] | n=1 vs 2, incomplete | undecided (fewer than 5 seeds) |" in summary
+    # 200 and 400 against 100 and 300: 3 of 4 pairs; a resample of 200, 200 against 300, 300 (1/16) gives 0, one of 400, 400 gives 1
+    assert "| Hopper-v4 | P(BC-OH > BC-SO) | 0.75 | [0.00, 1.00] | n=2 vs 2, incomplete | undecided (fewer than 5 seeds) |" in summary
+    # over envs: BC-OH (0.30 + 0.20) / 2; the others on Hopper only
+    assert ("Expert-normalised mean over envs: BC-SO 0.20 (1 env); BC-OH 0.25 (2 envs); Coarse-to-fine 0.60 (1 env); "
+            "C2F (output fusion) 0.60 (1 env).") in summary
+    assert (results / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_summary_goes_into_the_readme_between_its_markers(regime_map, tmp_path, capsys):
+    results, experts, _ = regime_map
+    readme = tmp_path / "README.md"
+    readme.write_text("# Title\n\n<!-- regimes -->\nthe old map\n<!-- /regimes -->\n\nReading.\n")
+    assert summarise(results, experts, "--readme", readme) == 0
+    text = readme.read_text()
+    assert text.startswith("# Title\n\n<!-- regimes -->\nMade by `python -m benchmark.regime_summary --results-dir ")
+    assert "the old map" not in text and (results / "summary.md").read_text().split("\n", 2)[2].strip() in text
+    assert text.endswith("\n\n![Regime map](results/regimes/summary.png)\n<!-- /regimes -->\n\nReading.\n")
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "benchmark.regime_summary", *map(str, args)], cwd=REPO_ROOT, capture_output=True, text=True)
+
+
+def test_bad_input_is_one_line_and_exit_2(regime_map, tmp_path):
+    results, experts, _ = regime_map
+    readme = tmp_path / "README.md"
+    readme.write_text("# Title without markers\n")
+    result = cli("--results-dir", results, "--expert-runs", experts, "--readme", readme)
+    assert_usage_error(result, "needs one <!-- regimes --> line and, after it, one <!-- /regimes --> line")
+    assert result.returncode == 2 and not (results / "summary.md").exists(), "nothing is written before the README is checked"
+    result = cli("--results-dir", tmp_path / "nowhere")
+    assert_usage_error(result, "results folder")
+    assert result.returncode == 2
+
+
+def test_no_valid_results_is_exit_2(tmp_path):
+    wrong = plant(runs_dir("fs1_noise", tmp_path), "bc_oh", "Hopper-v4", 1, [1.0] * 3)  # at the native rate
+    result = cli("--results-dir", tmp_path, "--expert-runs", tmp_path)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert lines[0] == f"left out {wrong}: not the fs1_noise settings (frame_skip 4 != 1)"
+    assert lines[-1].startswith("error: no valid regime results under") and not (tmp_path / "summary.md").exists()
+
+
+def test_the_verdict_needs_five_seeds_a_cell_and_an_interval_that_excludes_one_half():
+    from pathlib import Path
+
+    from benchmark.aggregate import Record
+
+    def records(method, scores):
+        return [Record(method, "Hopper-v4", seed, score, Path("x")) for seed, score in enumerate(scores, 1)]
+
+    apart = records("bc_so", [10, 11, 12, 13, 14]) + records("bc_oh", [20, 21, 22, 23, 24]) + records("c2f", [19, 21, 23, 25, 20])
+    lines = "\n".join(regime_summary.regime_tables("fs1_noise", apart, {}, ""))
+    assert "| Hopper-v4 | P(BC-OH > BC-SO) | 1.00 | [1.00, 1.00] | n=5 vs 5 | separated |" in lines
+    # c2f against bc_oh: 19 wins 0, 20 ties once (0.5), 21 wins 1 + tie, 23 wins 3 + tie, 25 wins 5: 10.5 of 25 pairs
+    assert "| Hopper-v4 | P(Coarse-to-fine > BC-OH) | 0.42 |" in lines and "n=5 vs 5 | not separated (more seeds) |" in lines
