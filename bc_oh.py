@@ -1,17 +1,15 @@
 # Behavioural cloning from an observation history, BC-OH (paper section 5.1 and Table 2); see README.md
-"""BC-OH: an MLP maps the last H noisy observations [o_{t-H+1}, ..., o_t] to the expert action a_t.
+"""BC-OH: an MLP maps the last H partially observed frames [o_{t-H+1}, ..., o_t] to the expert action a_t.
 
 With noisy velocities the history is informative, but it also lets the network infer a_{t-1} and copy
 it: the copycat shortcut that coarse-to-fine imitation (c2f.py) fights.
 
     python bc_oh.py --env Hopper-v4
+    python bc_oh.py --env Hopper-v4 --frame-skip 1 --seeds 1 2 3 4 5
 """
-import contextlib
 import hashlib
-import io
 import json
 import os
-import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -24,10 +22,6 @@ import torch
 import torch.nn as nn
 import tyro
 
-gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
-# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
-mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHOD = "bc_oh"
 
 
@@ -64,7 +58,7 @@ class Args:
     eval_every: int = 100
     """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation, run in parallel on the noisy env with the deterministic policy"""
+    """episodes per evaluation, run in parallel on the partially observed env with the deterministic policy"""
     output_dir: str = "runs/{method}/{env}"
     """where the JSON result (and with --save-model the checkpoints) are written"""
     save_model: bool = False
@@ -72,32 +66,174 @@ class Args:
     cuda: bool = False
     """train on the GPU when there is one"""
     cuda_graph: bool = True
-    """with --cuda, replay each training step as one captured CUDA graph (the fast path, same results as eager); --no-cuda-graph for plain eager steps"""
+    """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
+
+
+# ==============================================================================================
+# The method: one MLP on the flattened history, trained by MSE
+
+
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP."""
+    return nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim))
+
+
+class Normalizer(nn.Module):
+    """Standardises inputs with statistics of the training demos, stored with the model."""
+
+    def __init__(self, inputs: torch.Tensor):
+        super().__init__()
+        self.register_buffer("mean", inputs.mean(0))
+        self.register_buffer("std", inputs.std(0).clamp_min(1e-6))
+
+    def forward(self, x):
+        return (x - self.mean) / self.std
+
+
+class Policy(nn.Module):
+    """BC-OH: the whole history, flattened, into one MLP."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.net = mlp(obs_dim * history, act_dim, hidden)
+
+    def forward(self, obs_history):
+        return self.net(self.normalize(obs_history))
+
+
+def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
+    return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
+
+
+def train_seed(args, demos: dict, seed: int, device) -> dict:
+    """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
+    torch.manual_seed(seed)
+    env = make_env(args.env)
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
+    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
+    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
+    fast = device.type == "cuda" and args.cuda_graph
+    optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
+    steps_per_epoch = len(inputs) // args.batch_size
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+
+    def train_step():
+        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss
+
+    train_step = CudaGraphStep(train_step, enabled=fast)
+    for epoch in range(1, args.epochs + 1):
+        epoch_start = time.time()
+        for _ in range(steps_per_epoch):
+            set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
+            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
+            loss = train_step()
+            step += 1
+        last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
+        train_time += time.time() - epoch_start
+        if epoch % args.eval_every == 0 or epoch == args.epochs:
+            policy.eval()
+            evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
+            policy.train()
+        if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
+            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
+            print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
+                  f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
+
+
+# ==============================================================================================
+# Evaluation
+
+
+@torch.no_grad()
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
+    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
+    probe = make_env(args.env, args.frame_skip)
+    dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
+    probe.close()
+    envs = gym.vector.SyncVectorEnv(
+        [lambda i=i: PartialObservation(make_env(args.env, args.frame_skip), dims, args.obs_noise_std, args.hide_velocities, seed + i)
+         for i in range(episodes)],
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    )
+    obs, _ = envs.reset(seed=seed)
+    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
+    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
+    while running.any():
+        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
+        action = policy(inputs).cpu().numpy().clip(low, high)
+        obs, reward, terminated, truncated, _ = envs.step(action)
+        returns += reward * running
+        running &= ~(terminated | truncated)  # each env plays exactly one episode
+        new_episode = terminated | truncated
+    envs.close()
+    return returns.tolist()
+
+
+# ==============================================================================================
+# Shared plumbing, identical in every method file (each "# Copied from" block is checked by
+# scripts/check_copies.py): the seed loop, the partially observed env, demos, history, fast GPU path
+
+
+def run(args):
+    """Check the input, get the demos, train every seed, report and write the JSON result."""
+    check_common_args(args)
+    env = make_env(args.env)
+    velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
+    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
+    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
+    if args.learning_rate is None:
+        args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
+    device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
+    torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
+    demos = load_or_generate_demos(args, env)
+    output_dir = args.output_dir.format(method=METHOD, env=args.env)
+    scores, per_seed = [], {}
+    for seed in args.seeds:
+        result = train_seed(args, demos, seed, device)
+        score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
+        scores.append(score)
+        per_seed[seed] = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
+        if args.save_model:
+            checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
+                          "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
+            write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
+    result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
+    recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+    write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
+    print(f"\n{'seed':>6} | {'score':>8}")
+    for seed, score in zip(args.seeds, scores):
+        print(f"{seed:>6} | {score:8.1f}")
+    print(f"result: {result_path}")
+    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{'s' * (len(scores) > 1)}")
 
 
 class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-# ----------------------------------------------------------------------------------------------
-# Env: the partially observed setting of the paper (noisy velocities)
-
-
 def check_common_args(args):
     """Reject bad values of the arguments every method shares, before anything slow happens."""
+    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes", "frame_skip", "learning_rate"):
+        if getattr(args, name, None) is not None and not getattr(args, name) > 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass a positive value, or leave it out for its default")
     if args.obs_noise_std < 0:
         raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: pass 0 for noise-free observations")
-    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"):
-        if getattr(args, name, 1) <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass an integer >= 1")
     if not args.seeds:
         raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
     if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
         raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
-    if args.learning_rate is not None and not args.learning_rate > 0:
-        raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}: e.g. 1e-4, or leave it out for the paper's default")
-    if args.frame_skip is not None and args.frame_skip <= 0:
-        raise UsageError(f"--frame-skip must be positive, got {args.frame_skip}: e.g. 1, or leave it out for the env's own")
 
 
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
@@ -111,7 +247,8 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     if structure:  # v5 envs describe their layout
         start = structure["qpos"]  # positions come first, then the qvel block
         return list(range(start, start + structure["qvel"]))
-    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # v4, NOTES.md
+    # the v4 envs' qvel block, from their _get_obs in gymnasium/envs/mujoco/<env>_v4.py
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
         raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
@@ -153,10 +290,6 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
-
-
-# ----------------------------------------------------------------------------------------------
-# Data: expert demonstrations, noise, history
 
 
 # Copied from expert_ppo.ExpertPolicy
@@ -208,26 +341,8 @@ def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy,
     return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
 
 
-def write_atomically(path: str, write):
-    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "wb") as file:
-            write(file)
-        os.replace(tmp, path)
-    finally:  # after an interruption, remove the half-written temporary file
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def sha256_of(path: str) -> str:
-    with open(path, "rb") as file:
-        return hashlib.sha256(file.read()).hexdigest()
-
-
 def demo_meta(path: str) -> dict:
-    """The JSON meta of a demo file ({} when it has none or cannot be read)."""
+    """The JSON meta of a demo file: env_id, source, expert_sha256, num_samples, seed, frame_skip ({} if none)."""
     try:
         with np.load(path, allow_pickle=False) as data:
             return json.loads(str(data["meta"])) if "meta" in data else {}
@@ -235,47 +350,30 @@ def demo_meta(path: str) -> dict:
         return {}
 
 
-def cached_demos_are_current(path: str, expert_path: str, frame_skip: int, native: int) -> bool:
-    """A demo cache is current if it was rolled out at this frame skip (a cache without the record is
-    native) by the expert now at expert_path (its meta records the expert's SHA-256), so a retrained or
-    different --expert never reuses another expert's demos."""
-    if not os.path.isfile(path) or demo_meta(path).get("frame_skip", native) != frame_skip:
-        return False
-    if not os.path.isfile(expert_path):
-        return True  # no expert to compare with (demos copied from elsewhere): use them
-    return demo_meta(path).get("expert_sha256") == sha256_of(expert_path)
-
-
-def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
-    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
-    same_episode = ~episode_starts[1:]
-    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
-
-
 def load_or_generate_demos(args, env: gym.Env) -> dict:
-    """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
+    """The demos of --demos, or the rollout of --expert cached under demos/, made again when the cache was
+    recorded at another frame skip or by another expert file (its meta holds the expert's SHA-256)."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
     native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
-    frame_skip = args.frame_skip or native
-    rate = "" if frame_skip == native else f"_fs{frame_skip}"
-    path = args.demos or f"demos/{args.env}{rate}_{num_samples}.npz"
+    frame_skip = args.frame_skip or native  # a demo file without the record was made at the native rate
+    path = args.demos or f"demos/{args.env}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
     expert_path = args.expert.format(env=args.env)
-    if args.demos is None and not cached_demos_are_current(path, expert_path, frame_skip, native):
-        if not os.path.isfile(expert_path):
-            raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
-        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
-        demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples,
-                           "seed": 0, "frame_skip": frame_skip})
-        write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if args.demos is None and os.path.isfile(expert_path):
+        with open(expert_path, "rb") as file:
+            expert_sha256 = hashlib.sha256(file.read()).hexdigest()
+        if (demo_meta(path).get("expert_sha256"), demo_meta(path).get("frame_skip", native)) != (expert_sha256, frame_skip):
+            print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+            demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
+            meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples,
+                               "seed": 0, "frame_skip": frame_skip})
+            write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if not os.path.isfile(path) and args.demos:
+        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
-        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
-    recorded_rate = demo_meta(path).get("frame_skip", native)
-    if recorded_rate != frame_skip:
-        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
+        raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
+    if demo_meta(path).get("frame_skip", native) != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {demo_meta(path)['frame_skip']}, this run is at {frame_skip}: pass --frame-skip {demo_meta(path)['frame_skip']} or demos of this rate")
     try:
         with np.load(path, allow_pickle=False) as data:
             demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
@@ -291,6 +389,14 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
     print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
           "(near 0: copying the last action is a shortcut)")
     return demos
+
+
+def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
+    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    same_episode = ~episode_starts[1:]
+    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
@@ -326,74 +432,17 @@ class HistoryStacker:
         return self.frames.reshape(len(obs), -1)
 
 
-# ----------------------------------------------------------------------------------------------
-# Network
-
-
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The paper's three-layer MLP."""
-    return nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim))
-
-
-class Normalizer(nn.Module):
-    """Standardises inputs with statistics of the training demos, stored with the model."""
-
-    def __init__(self, inputs: torch.Tensor):
-        super().__init__()
-        self.register_buffer("mean", inputs.mean(0))
-        self.register_buffer("std", inputs.std(0).clamp_min(1e-6))
-
-    def forward(self, x):
-        return (x - self.mean) / self.std
-
-
-class Policy(nn.Module):
-    """BC-OH: the whole history, flattened, into one MLP."""
-
-    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
-        super().__init__()
-        self.normalize = Normalizer(inputs)
-        self.net = mlp(obs_dim * history, act_dim, hidden)
-
-    def forward(self, obs_history):
-        return self.net(self.normalize(obs_history))
-
-
-def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
-    return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
-
-
-# ----------------------------------------------------------------------------------------------
-# Evaluation
-
-
-@torch.no_grad()
-def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
-    probe = make_env(args.env, args.frame_skip)
-    dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
-    probe.close()
-    envs = gym.vector.SyncVectorEnv(
-        [lambda i=i: PartialObservation(make_env(args.env, args.frame_skip), dims, args.obs_noise_std, args.hide_velocities, seed + i)
-         for i in range(episodes)],
-        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
-    )
-    obs, _ = envs.reset(seed=seed)
-    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
-    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
-    while running.any():
-        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
-        action = policy(inputs).cpu().numpy().clip(low, high)
-        obs, reward, terminated, truncated, _ = envs.step(action)
-        returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays exactly one episode
-        new_episode = terminated | truncated
-    envs.close()
-    return returns.tolist()
-
-
-# ----------------------------------------------------------------------------------------------
-# Training
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+        os.replace(tmp, path)
+    finally:  # after an interruption, remove the half-written temporary file
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def make_adam(params, lr: float, fast: bool, **kwargs) -> torch.optim.Adam:
@@ -413,14 +462,8 @@ def set_learning_rate(optimizer: torch.optim.Optimizer, lr: float):
 
 
 class CudaGraphStep:
-    """The fast GPU path: a training step (forward, backward, Adam) captured once and replayed.
-
-    A step of these small networks launches dozens of tiny kernels, and on a GPU launching them costs
-    far more than running them; a CUDA graph launches them all at once. The step must read its inputs
-    from fixed tensors (e.g. a minibatch index buffer filled before each call). The first `warmup`
-    calls are ordinary steps on a side stream, as capture requires; the next call captures the step
-    (capture runs nothing) and replays it, as does every call after. Disabled, it is the plain step.
-    """
+    """The fast GPU path (--cuda): launching the dozens of tiny kernels of a step costs more than running
+    them, so the step (reading fixed tensors only) is captured once in a CUDA graph and replayed."""
 
     def __init__(self, step, enabled: bool, warmup: int = 3):
         self.step, self.enabled, self.warmup, self.graph, self.output = step, enabled, warmup, None, None
@@ -428,15 +471,15 @@ class CudaGraphStep:
     def __call__(self):
         if not self.enabled:
             return self.step()
-        if self.warmup > 0:
-            self.warmup -= 1
-            side_stream = torch.cuda.Stream()
-            side_stream.wait_stream(torch.cuda.current_stream())
-            with torch.cuda.stream(side_stream):
-                output = self.step()
-            torch.cuda.current_stream().wait_stream(side_stream)
-            return output
         if self.graph is None:
+            stream = torch.cuda.Stream()  # capture needs a few ordinary steps on a side stream first
+            stream.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(stream):
+                output = self.step() if self.warmup > 0 else None
+            torch.cuda.current_stream().wait_stream(stream)
+            if self.warmup > 0:
+                self.warmup -= 1
+                return output
             self.graph = torch.cuda.CUDAGraph()
             with torch.cuda.graph(self.graph):
                 self.output = self.step()
@@ -444,112 +487,15 @@ class CudaGraphStep:
         return self.output
 
 
-def train_seed(args, demos: dict, seed: int, device) -> dict:
-    """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
-    torch.manual_seed(seed)
-    env = make_env(args.env)
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
-    targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
-    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    fast = device.type == "cuda" and args.cuda_graph
-    optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
-
-    def train_step():
-        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        return loss
-
-    train_step = CudaGraphStep(train_step, enabled=fast)
-    for epoch in range(1, args.epochs + 1):
-        epoch_start = time.time()
-        for _ in range(steps_per_epoch):
-            set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-            loss = train_step()
-            step += 1
-        last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
-        train_time += time.time() - epoch_start
-        if epoch % args.eval_every == 0 or epoch == args.epochs:
-            policy.eval()
-            evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
-            policy.train()
-        if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
-            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
-            last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
-                  f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
-
-
-def run(args):
-    """Check the input, get the demos, train every seed, report and write the JSON result."""
-    check_common_args(args)
-    env = make_env(args.env)
-    velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
-    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
-    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
-    if args.learning_rate is None:
-        args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
-    device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
-    torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
-    demos = load_or_generate_demos(args, env)
-    output_dir = args.output_dir.format(method=METHOD, env=args.env)
-    scores, per_seed = [], {}
-    for seed in args.seeds:
-        result = train_seed(args, demos, seed, device)
-        score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
-        scores.append(score)
-        per_seed[seed] = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
-        if args.save_model:
-            checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
-                          "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
-            write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
-    result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    summary = {"env": args.env, "method": METHOD, "args": asdict(args), "scores": per_seed,
-               "mean": float(np.mean(scores)), "std": float(np.std(scores))}
-    write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
-    print(f"\n{'seed':>6} | {'score':>8}")
-    for seed, score in zip(args.seeds, scores):
-        print(f"{seed:>6} | {score:8.1f}")
-    print(f"result: {result_path}")
-    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seeds")
-
-
-def parse_args():
-    """tyro.cli(Args), but a bad flag or value becomes a UsageError: one line instead of tyro's box."""
-    box = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(box):
-            return tyro.cli(Args)
-    except SystemExit as stop:
-        if not stop.code:  # --help
-            raise
-        # Below the box's title, rules of "─" (or "-", without UTF-8) split it into sections: the
-        # first says what went wrong, and a "Perhaps you meant:" section names the likely flag.
-        sections = [[]]
-        for line in re.sub(r"\x1b\[[0-9;]*m", "", box.getvalue()).splitlines()[1:]:
-            text = line.strip().strip("│╭╮╰╯").strip()
-            if text and set(text) <= set("─-"):
-                sections.append([])
-            elif text:
-                sections[-1].append(text)
-        sections = [section for section in sections if section] or [["bad command line"]]
-        problem = " ".join(sections[0]).rstrip(".")
-        hint = next((section[1] for section in sections if section[0] == "Perhaps you meant:" and len(section) > 1), None)
-        raise UsageError(f"{problem}{f' (perhaps you meant {hint})' if hint else ''}: see --help for every flag and its values")
+gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
+# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 
 
 if __name__ == "__main__":
     try:
-        run(parse_args())
+        run(tyro.cli(Args))
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

@@ -10,12 +10,9 @@ of the paper's Table 3; each changes only what it names.
     python c2f.py --env Hopper-v4
     python c2f.py --env Hopper-v4 --fusion early --no-stop-gradient   # ablations
 """
-import contextlib
 import hashlib
-import io
 import json
 import os
-import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -28,10 +25,6 @@ import torch
 import torch.nn as nn
 import tyro
 
-gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
-# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
-mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHOD = "c2f"
 
 
@@ -91,274 +84,8 @@ class Args:
     """first train the coarse model alone for --epochs and freeze it, then the rest for --epochs with the final loss (evaluations in stage 2)"""
 
 
-# Copied from bc_oh.UsageError
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
-# ----------------------------------------------------------------------------------------------
-# Env: the partially observed setting of the paper (noisy velocities)
-
-
-# Copied from bc_oh.check_common_args
-def check_common_args(args):
-    """Reject bad values of the arguments every method shares, before anything slow happens."""
-    if args.obs_noise_std < 0:
-        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: pass 0 for noise-free observations")
-    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"):
-        if getattr(args, name, 1) <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass an integer >= 1")
-    if not args.seeds:
-        raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
-    if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
-        raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
-    if args.learning_rate is not None and not args.learning_rate > 0:
-        raise UsageError(f"--learning-rate must be positive, got {args.learning_rate}: e.g. 1e-4, or leave it out for the paper's default")
-    if args.frame_skip is not None and args.frame_skip <= 0:
-        raise UsageError(f"--frame-skip must be positive, got {args.frame_skip}: e.g. 1, or leave it out for the env's own")
-
-
-# Copied from bc_oh.velocity_dims
-def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
-    """Indices of the joint velocities in the observation, where the paper adds its noise."""
-    obs_dim = env.observation_space.shape[0]
-    if override:
-        if min(override) < 0 or max(override) >= obs_dim:
-            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
-        return sorted(set(override))
-    structure = getattr(env.unwrapped, "observation_structure", None)
-    if structure:  # v5 envs describe their layout
-        start = structure["qpos"]  # positions come first, then the qvel block
-        return list(range(start, start + structure["qvel"]))
-    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # v4, NOTES.md
-    family = env_id.split("-")[0]
-    if family not in known:
-        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
-    return list(range(*known[family]))
-
-
-# Copied from bc_oh.PartialObservation
-class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
-    with hide, those entries zeroed (positions only)."""
-
-    def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
-        super().__init__(env)
-        self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
-
-    def observation(self, obs):
-        obs = np.array(obs, dtype=np.float64)
-        if self.hide:
-            obs[self.dims] = 0.0
-        else:
-            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
-        return obs
-
-
-# Copied from bc_oh.make_env
-def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
-    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
-    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
-    try:
-        env = gym.make(env_id)
-    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
-        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
-    native = getattr(env.unwrapped, "frame_skip", None)
-    if frame_skip is None or frame_skip == native:
-        return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
-    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
-
-
-# ----------------------------------------------------------------------------------------------
-# Data: expert demonstrations, noise, history
-
-
-# Copied from expert_ppo.ExpertPolicy
-class ExpertPolicy(nn.Module):
-    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
-
-    def __init__(self, checkpoint: dict):
-        super().__init__()
-        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
-        self.net.load_state_dict(checkpoint["actor"])
-        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
-            self.register_buffer(name, checkpoint[name].float())
-
-    @torch.no_grad()
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
-        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
-
-
-# Copied from expert_ppo.load_expert
-def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
-    if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
-    try:
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
-    except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
-    if trained_on != env_id:
-        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
-    return policy.eval()
-
-
-# Copied from bc_oh.generate_demos
-def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
-    env, obs_list, action_list, starts = make_env(env_id, frame_skip), [], [], []
-    obs, _ = env.reset(seed=seed)
-    start = True
-    for _ in range(num_samples):
-        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
-        obs_list.append(obs), action_list.append(action), starts.append(start)
-        obs, _, terminated, truncated, _ = env.step(action)
-        start = terminated or truncated
-        if start:
-            obs, _ = env.reset()
-    env.close()
-    return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
-
-
-# Copied from bc_oh.write_atomically
-def write_atomically(path: str, write):
-    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "wb") as file:
-            write(file)
-        os.replace(tmp, path)
-    finally:  # after an interruption, remove the half-written temporary file
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-# Copied from bc_oh.sha256_of
-def sha256_of(path: str) -> str:
-    with open(path, "rb") as file:
-        return hashlib.sha256(file.read()).hexdigest()
-
-
-# Copied from bc_oh.demo_meta
-def demo_meta(path: str) -> dict:
-    """The JSON meta of a demo file ({} when it has none or cannot be read)."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return json.loads(str(data["meta"])) if "meta" in data else {}
-    except Exception:
-        return {}
-
-
-# Copied from bc_oh.cached_demos_are_current
-def cached_demos_are_current(path: str, expert_path: str, frame_skip: int, native: int) -> bool:
-    """A demo cache is current if it was rolled out at this frame skip (a cache without the record is
-    native) by the expert now at expert_path (its meta records the expert's SHA-256), so a retrained or
-    different --expert never reuses another expert's demos."""
-    if not os.path.isfile(path) or demo_meta(path).get("frame_skip", native) != frame_skip:
-        return False
-    if not os.path.isfile(expert_path):
-        return True  # no expert to compare with (demos copied from elsewhere): use them
-    return demo_meta(path).get("expert_sha256") == sha256_of(expert_path)
-
-
-# Copied from bc_oh.copy_error
-def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
-    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
-    same_episode = ~episode_starts[1:]
-    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
-
-
-# Copied from bc_oh.load_or_generate_demos
-def load_or_generate_demos(args, env: gym.Env) -> dict:
-    """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
-    native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
-    frame_skip = args.frame_skip or native
-    rate = "" if frame_skip == native else f"_fs{frame_skip}"
-    path = args.demos or f"demos/{args.env}{rate}_{num_samples}.npz"
-    expert_path = args.expert.format(env=args.env)
-    if args.demos is None and not cached_demos_are_current(path, expert_path, frame_skip, native):
-        if not os.path.isfile(expert_path):
-            raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
-        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
-        demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples,
-                           "seed": 0, "frame_skip": frame_skip})
-        write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
-    if not os.path.isfile(path):
-        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
-    recorded_rate = demo_meta(path).get("frame_skip", native)
-    if recorded_rate != frame_skip:
-        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
-    except Exception as error:
-        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
-    n = len(demos["actions"])
-    if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
-        raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
-    if n <= args.batch_size:
-        raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
-    demos["episode_starts"] = demos["episode_starts"].astype(bool)
-    demos["episode_starts"][0] = True
-    print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
-          "(near 0: copying the last action is a shortcut)")
-    return demos
-
-
-# Copied from bc_oh.partially_observe
-def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
-    (a noisy sensor at collection time), or with hide, those entries zeroed."""
-    observed = observations.copy()
-    if hide:
-        observed[:, dims] = 0.0
-    else:
-        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
-    return observed
-
-
-# Copied from bc_oh.stack_history
-def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
-    index = np.arange(len(observations))
-    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
-    frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
-    return np.concatenate(frames, axis=1)
-
-
-# Copied from bc_oh.HistoryStacker
-class HistoryStacker:
-    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
-
-    def __init__(self, history: int):
-        self.history, self.frames = history, None
-
-    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
-        if self.frames is None:
-            self.frames = np.repeat(obs[:, None], self.history, axis=1)
-        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
-        self.frames[episode_start] = obs[episode_start][:, None]
-        return self.frames.reshape(len(obs), -1)
-
-
-# ----------------------------------------------------------------------------------------------
-# Network
+# ==============================================================================================
+# The method: a coarse model on o_t, a history policy refining sg(zeta), Eq. 2
 
 
 # Copied from bc_oh.mlp
@@ -427,91 +154,6 @@ class Policy(nn.Module):
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
     return Policy(obs_dim, act_dim, args.history, args.hidden, inputs, args.fusion, args.coarse_output,
                   args.coarse_input, args.policy_input, args.stop_gradient)
-
-
-# ----------------------------------------------------------------------------------------------
-# Evaluation
-
-
-# Copied from bc_oh.evaluate
-@torch.no_grad()
-def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
-    probe = make_env(args.env, args.frame_skip)
-    dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
-    probe.close()
-    envs = gym.vector.SyncVectorEnv(
-        [lambda i=i: PartialObservation(make_env(args.env, args.frame_skip), dims, args.obs_noise_std, args.hide_velocities, seed + i)
-         for i in range(episodes)],
-        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
-    )
-    obs, _ = envs.reset(seed=seed)
-    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
-    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
-    while running.any():
-        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
-        action = policy(inputs).cpu().numpy().clip(low, high)
-        obs, reward, terminated, truncated, _ = envs.step(action)
-        returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays exactly one episode
-        new_episode = terminated | truncated
-    envs.close()
-    return returns.tolist()
-
-
-# ----------------------------------------------------------------------------------------------
-# Training
-
-
-# Copied from bc_oh.make_adam
-def make_adam(params, lr: float, fast: bool, **kwargs) -> torch.optim.Adam:
-    """Adam; a step captured in a CUDA graph needs its state on the GPU (capturable) and a tensor lr."""
-    if fast:
-        return torch.optim.Adam(params, lr=torch.tensor(lr, device="cuda"), capturable=True, **kwargs)
-    return torch.optim.Adam(params, lr=lr, **kwargs)
-
-
-# Copied from bc_oh.set_learning_rate
-def set_learning_rate(optimizer: torch.optim.Optimizer, lr: float):
-    """Set the lr in place: a CUDA graph reads a tensor lr from its fixed address at every replay."""
-    for group in optimizer.param_groups:
-        if torch.is_tensor(group["lr"]):
-            group["lr"].fill_(lr)
-        else:
-            group["lr"] = lr
-
-
-# Copied from bc_oh.CudaGraphStep
-class CudaGraphStep:
-    """The fast GPU path: a training step (forward, backward, Adam) captured once and replayed.
-
-    A step of these small networks launches dozens of tiny kernels, and on a GPU launching them costs
-    far more than running them; a CUDA graph launches them all at once. The step must read its inputs
-    from fixed tensors (e.g. a minibatch index buffer filled before each call). The first `warmup`
-    calls are ordinary steps on a side stream, as capture requires; the next call captures the step
-    (capture runs nothing) and replays it, as does every call after. Disabled, it is the plain step.
-    """
-
-    def __init__(self, step, enabled: bool, warmup: int = 3):
-        self.step, self.enabled, self.warmup, self.graph, self.output = step, enabled, warmup, None, None
-
-    def __call__(self):
-        if not self.enabled:
-            return self.step()
-        if self.warmup > 0:
-            self.warmup -= 1
-            side_stream = torch.cuda.Stream()
-            side_stream.wait_stream(torch.cuda.current_stream())
-            with torch.cuda.stream(side_stream):
-                output = self.step()
-            torch.cuda.current_stream().wait_stream(side_stream)
-            return output
-        if self.graph is None:
-            self.graph = torch.cuda.CUDAGraph()
-            with torch.cuda.graph(self.graph):
-                self.output = self.step()
-        self.graph.replay()
-        return self.output
 
 
 def train_coarse(policy: Policy, args, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device, fast: bool):
@@ -590,6 +232,41 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
 
 
+# ==============================================================================================
+# Evaluation
+
+
+# Copied from bc_oh.evaluate
+@torch.no_grad()
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
+    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
+    probe = make_env(args.env, args.frame_skip)
+    dims, low, high = velocity_dims(probe, args.env, args.velocity_dims), probe.action_space.low, probe.action_space.high
+    probe.close()
+    envs = gym.vector.SyncVectorEnv(
+        [lambda i=i: PartialObservation(make_env(args.env, args.frame_skip), dims, args.obs_noise_std, args.hide_velocities, seed + i)
+         for i in range(episodes)],
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    )
+    obs, _ = envs.reset(seed=seed)
+    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
+    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
+    while running.any():
+        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
+        action = policy(inputs).cpu().numpy().clip(low, high)
+        obs, reward, terminated, truncated, _ = envs.step(action)
+        returns += reward * running
+        running &= ~(terminated | truncated)  # each env plays exactly one episode
+        new_episode = terminated | truncated
+    envs.close()
+    return returns.tolist()
+
+
+# ==============================================================================================
+# Shared plumbing, identical in every method file (each "# Copied from" block is checked by
+# scripts/check_copies.py): the seed loop, the partially observed env, demos, history, fast GPU path
+
+
 # Copied from bc_oh.run
 def run(args):
     """Check the input, get the demos, train every seed, report and write the JSON result."""
@@ -615,44 +292,309 @@ def run(args):
                           "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    summary = {"env": args.env, "method": METHOD, "args": asdict(args), "scores": per_seed,
-               "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+    recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
     write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
     print(f"\n{'seed':>6} | {'score':>8}")
     for seed, score in zip(args.seeds, scores):
         print(f"{seed:>6} | {score:8.1f}")
     print(f"result: {result_path}")
-    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seeds")
+    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{'s' * (len(scores) > 1)}")
 
 
-# Copied from bc_oh.parse_args
-def parse_args():
-    """tyro.cli(Args), but a bad flag or value becomes a UsageError: one line instead of tyro's box."""
-    box = io.StringIO()
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# Copied from bc_oh.check_common_args
+def check_common_args(args):
+    """Reject bad values of the arguments every method shares, before anything slow happens."""
+    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes", "frame_skip", "learning_rate"):
+        if getattr(args, name, None) is not None and not getattr(args, name) > 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass a positive value, or leave it out for its default")
+    if args.obs_noise_std < 0:
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: pass 0 for noise-free observations")
+    if not args.seeds:
+        raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
+    if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
+        raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
+
+
+# Copied from bc_oh.velocity_dims
+def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
+    """Indices of the joint velocities in the observation, where the paper adds its noise."""
+    obs_dim = env.observation_space.shape[0]
+    if override:
+        if min(override) < 0 or max(override) >= obs_dim:
+            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        return sorted(set(override))
+    structure = getattr(env.unwrapped, "observation_structure", None)
+    if structure:  # v5 envs describe their layout
+        start = structure["qpos"]  # positions come first, then the qvel block
+        return list(range(start, start + structure["qvel"]))
+    # the v4 envs' qvel block, from their _get_obs in gymnasium/envs/mujoco/<env>_v4.py
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
+    family = env_id.split("-")[0]
+    if family not in known:
+        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    return list(range(*known[family]))
+
+
+# Copied from bc_oh.PartialObservation
+class PartialObservation(gym.ObservationWrapper):
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
+    with hide, those entries zeroed (positions only)."""
+
+    def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
+        super().__init__(env)
+        self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
+
+    def observation(self, obs):
+        obs = np.array(obs, dtype=np.float64)
+        if self.hide:
+            obs[self.dims] = 0.0
+        else:
+            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        return obs
+
+
+# Copied from bc_oh.make_env
+def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
+    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
+    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
     try:
-        with contextlib.redirect_stderr(box):
-            return tyro.cli(Args)
-    except SystemExit as stop:
-        if not stop.code:  # --help
-            raise
-        # Below the box's title, rules of "─" (or "-", without UTF-8) split it into sections: the
-        # first says what went wrong, and a "Perhaps you meant:" section names the likely flag.
-        sections = [[]]
-        for line in re.sub(r"\x1b\[[0-9;]*m", "", box.getvalue()).splitlines()[1:]:
-            text = line.strip().strip("│╭╮╰╯").strip()
-            if text and set(text) <= set("─-"):
-                sections.append([])
-            elif text:
-                sections[-1].append(text)
-        sections = [section for section in sections if section] or [["bad command line"]]
-        problem = " ".join(sections[0]).rstrip(".")
-        hint = next((section[1] for section in sections if section[0] == "Perhaps you meant:" and len(section) > 1), None)
-        raise UsageError(f"{problem}{f' (perhaps you meant {hint})' if hint else ''}: see --help for every flag and its values")
+        env = gym.make(env_id)
+    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+
+
+# Copied from expert_ppo.ExpertPolicy
+class ExpertPolicy(nn.Module):
+    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+
+    def __init__(self, checkpoint: dict):
+        super().__init__()
+        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
+        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net.load_state_dict(checkpoint["actor"])
+        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
+            self.register_buffer(name, checkpoint[name].float())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+
+
+# Copied from expert_ppo.load_expert
+def load_expert(path: str, env_id: str) -> ExpertPolicy:
+    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    if not os.path.isfile(path):
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+    if trained_on != env_id:
+        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+    return policy.eval()
+
+
+# Copied from bc_oh.generate_demos
+def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
+    env, obs_list, action_list, starts = make_env(env_id, frame_skip), [], [], []
+    obs, _ = env.reset(seed=seed)
+    start = True
+    for _ in range(num_samples):
+        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        obs_list.append(obs), action_list.append(action), starts.append(start)
+        obs, _, terminated, truncated, _ = env.step(action)
+        start = terminated or truncated
+        if start:
+            obs, _ = env.reset()
+    env.close()
+    return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
+
+
+# Copied from bc_oh.demo_meta
+def demo_meta(path: str) -> dict:
+    """The JSON meta of a demo file: env_id, source, expert_sha256, num_samples, seed, frame_skip ({} if none)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return json.loads(str(data["meta"])) if "meta" in data else {}
+    except Exception:
+        return {}
+
+
+# Copied from bc_oh.load_or_generate_demos
+def load_or_generate_demos(args, env: gym.Env) -> dict:
+    """The demos of --demos, or the rollout of --expert cached under demos/, made again when the cache was
+    recorded at another frame skip or by another expert file (its meta holds the expert's SHA-256)."""
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
+    native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
+    frame_skip = args.frame_skip or native  # a demo file without the record was made at the native rate
+    path = args.demos or f"demos/{args.env}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
+    expert_path = args.expert.format(env=args.env)
+    if args.demos is None and os.path.isfile(expert_path):
+        with open(expert_path, "rb") as file:
+            expert_sha256 = hashlib.sha256(file.read()).hexdigest()
+        if (demo_meta(path).get("expert_sha256"), demo_meta(path).get("frame_skip", native)) != (expert_sha256, frame_skip):
+            print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+            demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
+            meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples,
+                               "seed": 0, "frame_skip": frame_skip})
+            write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if not os.path.isfile(path) and args.demos:
+        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
+    if not os.path.isfile(path):
+        raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
+    if demo_meta(path).get("frame_skip", native) != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {demo_meta(path)['frame_skip']}, this run is at {frame_skip}: pass --frame-skip {demo_meta(path)['frame_skip']} or demos of this rate")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
+    n = len(demos["actions"])
+    if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
+        raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
+    if n <= args.batch_size:
+        raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
+    demos["episode_starts"] = demos["episode_starts"].astype(bool)
+    demos["episode_starts"][0] = True
+    print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
+          "(near 0: copying the last action is a shortcut)")
+    return demos
+
+
+# Copied from bc_oh.copy_error
+def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
+    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    same_episode = ~episode_starts[1:]
+    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
+
+
+# Copied from bc_oh.partially_observe
+def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
+    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
+    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    observed = observations.copy()
+    if hide:
+        observed[:, dims] = 0.0
+    else:
+        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    return observed
+
+
+# Copied from bc_oh.stack_history
+def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
+    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
+    index = np.arange(len(observations))
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
+    return np.concatenate(frames, axis=1)
+
+
+# Copied from bc_oh.HistoryStacker
+class HistoryStacker:
+    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
+
+    def __init__(self, history: int):
+        self.history, self.frames = history, None
+
+    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
+        if self.frames is None:
+            self.frames = np.repeat(obs[:, None], self.history, axis=1)
+        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
+        self.frames[episode_start] = obs[episode_start][:, None]
+        return self.frames.reshape(len(obs), -1)
+
+
+# Copied from bc_oh.write_atomically
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+        os.replace(tmp, path)
+    finally:  # after an interruption, remove the half-written temporary file
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+# Copied from bc_oh.make_adam
+def make_adam(params, lr: float, fast: bool, **kwargs) -> torch.optim.Adam:
+    """Adam; a step captured in a CUDA graph needs its state on the GPU (capturable) and a tensor lr."""
+    if fast:
+        return torch.optim.Adam(params, lr=torch.tensor(lr, device="cuda"), capturable=True, **kwargs)
+    return torch.optim.Adam(params, lr=lr, **kwargs)
+
+
+# Copied from bc_oh.set_learning_rate
+def set_learning_rate(optimizer: torch.optim.Optimizer, lr: float):
+    """Set the lr in place: a CUDA graph reads a tensor lr from its fixed address at every replay."""
+    for group in optimizer.param_groups:
+        if torch.is_tensor(group["lr"]):
+            group["lr"].fill_(lr)
+        else:
+            group["lr"] = lr
+
+
+# Copied from bc_oh.CudaGraphStep
+class CudaGraphStep:
+    """The fast GPU path (--cuda): launching the dozens of tiny kernels of a step costs more than running
+    them, so the step (reading fixed tensors only) is captured once in a CUDA graph and replayed."""
+
+    def __init__(self, step, enabled: bool, warmup: int = 3):
+        self.step, self.enabled, self.warmup, self.graph, self.output = step, enabled, warmup, None, None
+
+    def __call__(self):
+        if not self.enabled:
+            return self.step()
+        if self.graph is None:
+            stream = torch.cuda.Stream()  # capture needs a few ordinary steps on a side stream first
+            stream.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(stream):
+                output = self.step() if self.warmup > 0 else None
+            torch.cuda.current_stream().wait_stream(stream)
+            if self.warmup > 0:
+                self.warmup -= 1
+                return output
+            self.graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(self.graph):
+                self.output = self.step()
+        self.graph.replay()
+        return self.output
+
+
+gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
+# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 
 
 if __name__ == "__main__":
     try:
-        run(parse_args())
+        run(tyro.cli(Args))
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

@@ -18,12 +18,9 @@ It prints a table and writes the pictures and a JSON report to --out-dir.
     python bc_so.py --env Hopper-v4 --seeds 1 --save-model     # likewise bc_oh.py and c2f.py
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
 """
-import contextlib
 import hashlib
-import io
 import json
 import os
-import re
 import sys
 from dataclasses import asdict, dataclass
 from types import SimpleNamespace
@@ -101,7 +98,8 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     if structure:  # v5 envs describe their layout
         start = structure["qpos"]  # positions come first, then the qvel block
         return list(range(start, start + structure["qvel"]))
-    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # v4, NOTES.md
+    # the v4 envs' qvel block, from their _get_obs in gymnasium/envs/mujoco/<env>_v4.py
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
         raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
@@ -215,32 +213,14 @@ def write_atomically(path: str, write):
             os.remove(tmp)
 
 
-# Copied from bc_oh.sha256_of
-def sha256_of(path: str) -> str:
-    with open(path, "rb") as file:
-        return hashlib.sha256(file.read()).hexdigest()
-
-
 # Copied from bc_oh.demo_meta
 def demo_meta(path: str) -> dict:
-    """The JSON meta of a demo file ({} when it has none or cannot be read)."""
+    """The JSON meta of a demo file: env_id, source, expert_sha256, num_samples, seed, frame_skip ({} if none)."""
     try:
         with np.load(path, allow_pickle=False) as data:
             return json.loads(str(data["meta"])) if "meta" in data else {}
     except Exception:
         return {}
-
-
-# Copied from bc_oh.cached_demos_are_current
-def cached_demos_are_current(path: str, expert_path: str, frame_skip: int, native: int) -> bool:
-    """A demo cache is current if it was rolled out at this frame skip (a cache without the record is
-    native) by the expert now at expert_path (its meta records the expert's SHA-256), so a retrained or
-    different --expert never reuses another expert's demos."""
-    if not os.path.isfile(path) or demo_meta(path).get("frame_skip", native) != frame_skip:
-        return False
-    if not os.path.isfile(expert_path):
-        return True  # no expert to compare with (demos copied from elsewhere): use them
-    return demo_meta(path).get("expert_sha256") == sha256_of(expert_path)
 
 
 # Copied from bc_oh.copy_error
@@ -254,27 +234,29 @@ def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
 
 # Copied from bc_oh.load_or_generate_demos
 def load_or_generate_demos(args, env: gym.Env) -> dict:
-    """The demos of --demos, or the cached rollout of --expert, generating it when not current."""
+    """The demos of --demos, or the rollout of --expert cached under demos/, made again when the cache was
+    recorded at another frame skip or by another expert file (its meta holds the expert's SHA-256)."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
     native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
-    frame_skip = args.frame_skip or native
-    rate = "" if frame_skip == native else f"_fs{frame_skip}"
-    path = args.demos or f"demos/{args.env}{rate}_{num_samples}.npz"
+    frame_skip = args.frame_skip or native  # a demo file without the record was made at the native rate
+    path = args.demos or f"demos/{args.env}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
     expert_path = args.expert.format(env=args.env)
-    if args.demos is None and not cached_demos_are_current(path, expert_path, frame_skip, native):
-        if not os.path.isfile(expert_path):
-            raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env} --run-dir runs/expert` and copy runs/expert/best.pt there, or pass --demos")
-        print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}" + (" (replacing a cache not made by this expert)" if os.path.isfile(path) else ""))
-        demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
-        meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": sha256_of(expert_path), "num_samples": num_samples,
-                           "seed": 0, "frame_skip": frame_skip})
-        write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if args.demos is None and os.path.isfile(expert_path):
+        with open(expert_path, "rb") as file:
+            expert_sha256 = hashlib.sha256(file.read()).hexdigest()
+        if (demo_meta(path).get("expert_sha256"), demo_meta(path).get("frame_skip", native)) != (expert_sha256, frame_skip):
+            print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+            demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
+            meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples,
+                               "seed": 0, "frame_skip": frame_skip})
+            write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
+    if not os.path.isfile(path) and args.demos:
+        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
-        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to generate demos from the expert")
-    recorded_rate = demo_meta(path).get("frame_skip", native)
-    if recorded_rate != frame_skip:
-        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
+        raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
+    if demo_meta(path).get("frame_skip", native) != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {demo_meta(path)['frame_skip']}, this run is at {frame_skip}: pass --frame-skip {demo_meta(path)['frame_skip']} or demos of this rate")
     try:
         with np.load(path, allow_pickle=False) as data:
             demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
@@ -723,34 +705,9 @@ def run(args):
     print(f"pictures and report: {out_dir}/ (zeta_effect.png, history_intervention.png, copycat_analysis.json)")
 
 
-# Copied from bc_oh.parse_args
-def parse_args():
-    """tyro.cli(Args), but a bad flag or value becomes a UsageError: one line instead of tyro's box."""
-    box = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(box):
-            return tyro.cli(Args)
-    except SystemExit as stop:
-        if not stop.code:  # --help
-            raise
-        # Below the box's title, rules of "─" (or "-", without UTF-8) split it into sections: the
-        # first says what went wrong, and a "Perhaps you meant:" section names the likely flag.
-        sections = [[]]
-        for line in re.sub(r"\x1b\[[0-9;]*m", "", box.getvalue()).splitlines()[1:]:
-            text = line.strip().strip("│╭╮╰╯").strip()
-            if text and set(text) <= set("─-"):
-                sections.append([])
-            elif text:
-                sections[-1].append(text)
-        sections = [section for section in sections if section] or [["bad command line"]]
-        problem = " ".join(sections[0]).rstrip(".")
-        hint = next((section[1] for section in sections if section[0] == "Perhaps you meant:" and len(section) > 1), None)
-        raise UsageError(f"{problem}{f' (perhaps you meant {hint})' if hint else ''}: see --help for every flag and its values")
-
-
 if __name__ == "__main__":
     try:
-        run(parse_args())
+        run(tyro.cli(Args))
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

@@ -10,11 +10,8 @@ The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_o
 the actor, the frozen observation-normalisation statistics, the action bounds, env id, frame skip, shapes,
 args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
 """
-import contextlib
-import io
 import os
 import random
-import re
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -476,34 +473,9 @@ def train(args: Args):
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
 
 
-# Copied from bc_oh.parse_args
-def parse_args():
-    """tyro.cli(Args), but a bad flag or value becomes a UsageError: one line instead of tyro's box."""
-    box = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(box):
-            return tyro.cli(Args)
-    except SystemExit as stop:
-        if not stop.code:  # --help
-            raise
-        # Below the box's title, rules of "─" (or "-", without UTF-8) split it into sections: the
-        # first says what went wrong, and a "Perhaps you meant:" section names the likely flag.
-        sections = [[]]
-        for line in re.sub(r"\x1b\[[0-9;]*m", "", box.getvalue()).splitlines()[1:]:
-            text = line.strip().strip("│╭╮╰╯").strip()
-            if text and set(text) <= set("─-"):
-                sections.append([])
-            elif text:
-                sections[-1].append(text)
-        sections = [section for section in sections if section] or [["bad command line"]]
-        problem = " ".join(sections[0]).rstrip(".")
-        hint = next((section[1] for section in sections if section[0] == "Perhaps you meant:" and len(section) > 1), None)
-        raise UsageError(f"{problem}{f' (perhaps you meant {hint})' if hint else ''}: see --help for every flag and its values")
-
-
 if __name__ == "__main__":
     try:
-        args = parse_args()
+        args = tyro.cli(Args)
         eval_only(args) if args.eval_only else train(args)
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)

@@ -10,7 +10,6 @@ Reads <results-dir>/<regime>/runs/<method>/<env>/result_seeds<S>.json for every 
 Corrupt or partial results, and runs at settings other than their regime's, are reported on stderr and left out.
 """
 import json
-import os
 import statistics
 import sys
 from pathlib import Path

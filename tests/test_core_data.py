@@ -1,8 +1,10 @@
 """The data pipeline every method shares (bc_oh.py holds the originals; check_copies keeps the copies equal):
 noise on the velocities, history stacking in training and evaluation, demo generation and caching.
 Bad input is tested through the command line in test_core_scripts.py."""
+import hashlib
 import json
 import os
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -143,7 +145,7 @@ def test_demo_cache_follows_its_expert(tmp_path, monkeypatch):
     env = gym.make("Hopper-v4")
     first = bc_oh.load_or_generate_demos(args, env)
     with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
-        assert json.loads(str(saved["meta"]))["expert_sha256"] == bc_oh.sha256_of("expert.pt")
+        assert json.loads(str(saved["meta"]))["expert_sha256"] == hashlib.sha256(Path("expert.pt").read_bytes()).hexdigest()
 
     checkpoint = torch.load("expert.pt", weights_only=True)  # "retrain" it: other weights, same path
     checkpoint["actor"] = {key: value + 0.05 for key, value in checkpoint["actor"].items()}

@@ -13,7 +13,7 @@ import bc_so
 import c2f
 from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
 
-SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds$")
+SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds?$")
 
 
 @pytest.fixture(scope="module")
