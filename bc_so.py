@@ -59,7 +59,7 @@ class Args:
     eval_every: int = 100
     """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation, run in parallel on the noisy env with the deterministic policy"""
+    """episodes per evaluation, run in parallel on the partially observed env with the deterministic policy"""
     output_dir: str = "runs/{method}/{env}"
     """where the JSON result (and with --save-model the checkpoints) are written"""
     save_model: bool = False
@@ -67,7 +67,7 @@ class Args:
     cuda: bool = False
     """train on the GPU when there is one"""
     cuda_graph: bool = True
-    """with --cuda, replay each training step as one captured CUDA graph (the fast path, same results as eager); --no-cuda-graph for plain eager steps"""
+    """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
 
 
 # ==============================================================================================

@@ -1,4 +1,4 @@
-# DAgger with the expert online (paper Table 2, "DAgger 8K"; NOTES.md section 3); see README.md
+# DAgger with the expert online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README.md
 """DAgger: BC-OH on the demos, then rounds of on-policy data labelled by the expert (Ross et al. 2011).
 
 Round 0 trains BC-OH on the demos exactly as bc_oh.py does. Each of the --dagger-rounds rounds then
@@ -40,7 +40,7 @@ class Args:
     demos: Optional[str] = None
     """demonstrations (.npz, format in README); default: roll out the expert once and cache under demos/"""
     expert: str = "experts/{env}.pt"
-    """expert checkpoint used to generate demonstrations when --demos is not given"""
+    """expert checkpoint: it generates the demonstrations when --demos is not given, and labels every DAgger round's states"""
     num_demo_samples: Optional[int] = None
     """demonstration steps to generate (default as in the paper: 20000 for Hopper, 10000 otherwise)"""
     obs_noise_std: float = 0.2
@@ -62,7 +62,7 @@ class Args:
     eval_every: int = 100
     """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation, run in parallel on the noisy env with the deterministic policy"""
+    """episodes per evaluation, run in parallel on the partially observed env with the deterministic policy"""
     output_dir: str = "runs/{method}/{env}"
     """where the JSON result (and with --save-model the checkpoints) are written"""
     save_model: bool = False
@@ -70,7 +70,7 @@ class Args:
     cuda: bool = False
     """train on the GPU when there is one"""
     cuda_graph: bool = True
-    """with --cuda, replay each training step as one captured CUDA graph (the fast path, same results as eager); --no-cuda-graph for plain eager steps"""
+    """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
     dagger_samples: int = 8000
     """extra states labelled by the expert over all rounds (the paper's "DAgger 8K"), split evenly over the rounds"""
     dagger_rounds: int = 4

@@ -55,12 +55,10 @@ class Args:
     """minibatch size"""
     learning_rate: Optional[float] = None
     """Adam learning rate, decayed linearly to zero (default: 1e-5 for Hopper, 1e-4 otherwise, as in the paper)"""
-    hidden: int = 256
-    """width of the hidden layers of every three-layer MLP"""
     eval_every: int = 100
     """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation, run in parallel on the noisy env with the deterministic policy"""
+    """episodes per evaluation, run in parallel on the partially observed env with the deterministic policy"""
     output_dir: str = "runs/{method}/{env}"
     """where the JSON result (and with --save-model the checkpoints) are written"""
     save_model: bool = False
@@ -68,7 +66,7 @@ class Args:
     cuda: bool = False
     """train on the GPU when there is one"""
     cuda_graph: bool = True
-    """with --cuda, replay each training step as one captured CUDA graph (the fast path, same results as eager); --no-cuda-graph for plain eager steps"""
+    """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
     adversary_weight: float = 1.0
     """w in MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}) (the authors' default; their Hopper command used 2.0).
     The encoder and policy use --learning-rate (same defaults and linear decay as bc_oh.py, so FCA differs
@@ -78,7 +76,7 @@ class Args:
     the authors' default 2e-4, their Hopper command 4e-4)"""
     encoder_hidden: int = 300
     """width of the encoder's three hidden layers and of the one hidden layer of the policy head and the
-    adversary (the authors' 300; FCA's networks do not use --hidden)"""
+    adversary (the authors' 300)"""
     embedding_dim: int = 100
     """size of the history embedding e (the authors' 100)"""
 
