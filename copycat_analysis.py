@@ -13,7 +13,7 @@ expert demonstrations (with fresh velocity noise) and on each policy's own rollo
 3. the copycat score on held-out demos: at action changepoints (top decile of |a_t - a_{t-1}|), the fraction
    of predictions closer to a_{t-1} than to a_t.
 
-It prints a table and writes the pictures and a JSON report to --out-dir.
+It prints a table and writes the pictures and a JSON report to --output-dir.
 
     python bc_so.py --env Hopper-v4 --seeds 1 --save-model     # likewise bc_oh.py and c2f.py
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
@@ -59,19 +59,19 @@ class Args:
     """held-out demonstrations (.npz, the method scripts' format); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that generates the held-out demos when --demos is not given"""
-    num_samples: int = 5000
+    num_demo_samples: int = 5000
     """held-out demo steps to generate when --demos is not given"""
     obs_noise_std: Optional[float] = None
     """std of the velocity noise on the demos' and the rollouts' observations (default: the models' training value)"""
     history: Optional[int] = None
     """frames in the history (default: the models'; it must be the BC-OH and C2F models' own)"""
-    episodes: int = 3
-    """rollout episodes of each policy in the noisy env"""
+    eval_episodes: int = 3
+    """rollout episodes of each policy in the partially observed env"""
     zeta_quantile: float = 0.05
     """do(zeta_d) = lo_d / hi_d: the q and 1-q quantiles of the demo actions of dim d (0: their min and max)"""
     changepoint_quantile: float = 0.9
     """changepoints of the copycat score: the steps whose |a_t - a_{t-1}| is above this quantile (0.9: the top decile)"""
-    out_dir: str = "analysis/{env}"
+    output_dir: str = "analysis/{env}"
     """where the pictures and the JSON report are written"""
     seed: int = 1
     """seed of the held-out demos (not 0, the training demos' seed), of their noise and of the rollouts"""
@@ -282,8 +282,8 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos")
-    print(f"generating {args.num_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})")
-    return generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), args.num_samples, seed=args.seed)
+    print(f"generating {args.num_demo_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})")
+    return generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), args.num_demo_samples, seed=args.seed)
 
 
 # Copied from bc_oh.partially_observe
@@ -618,10 +618,10 @@ def plot_history_intervention(path: str, env_id: str, changes: dict):
 
 def check_args(args):
     """Reject bad values before anything slow happens."""
-    if args.num_samples < 2:
-        raise UsageError(f"--num-samples must be at least 2, got {args.num_samples}")
-    if args.episodes <= 0:
-        raise UsageError(f"--episodes must be positive, got {args.episodes}")
+    if args.num_demo_samples < 2:
+        raise UsageError(f"--num-demo-samples must be at least 2, got {args.num_demo_samples}")
+    if args.eval_episodes <= 0:
+        raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
     if args.history is not None and args.history <= 0:
         raise UsageError(f"--history must be positive, got {args.history}")
     if args.obs_noise_std is not None and args.obs_noise_std < 0:
@@ -661,7 +661,7 @@ def run(args):
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
     actors = {method: as_actor(models[method], low, high) for method in METHODS}
-    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.episodes)] for method in METHODS}
+    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.eval_episodes)] for method in METHODS}
     changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
     for method in METHODS:
         change, towards = history_intervention(actors[method], histories[steps], obs_dim, actions[steps - 1], scale)
@@ -683,7 +683,7 @@ def run(args):
     zeta = {"lo": lo.tolist(), "hi": hi.tolist(), "effect_demos": effect_demos.mean(0).tolist(), "effect_rollouts": effect_rollouts.mean(0).tolist(),
             "relative_demos": (effect_demos.mean(0) / (hi - lo)).tolist(), "relative_rollouts": (effect_rollouts.mean(0) / (hi - lo)).tolist()}
 
-    out_dir = args.out_dir.format(env=args.env)
+    out_dir = args.output_dir.format(env=args.env)
     plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"],
                      saved["c2f"]["fusion"] == "late")
     plot_history_intervention(os.path.join(out_dir, "history_intervention.png"), args.env, changes)
@@ -691,7 +691,7 @@ def run(args):
                "changepoints": len(points), "action_std": scale.tolist(), "methods": report, "zeta": zeta}
     write_atomically(os.path.join(out_dir, "copycat_analysis.json"), lambda file: file.write(json.dumps(summary, indent=1).encode()))
 
-    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.episodes} rollouts per policy, noise std {std}, history {history}")
+    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, noise std {std}, history {history}")
     print("do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}")
     print(f"{'method':>6} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
     for method, row in report.items():

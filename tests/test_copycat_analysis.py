@@ -166,7 +166,7 @@ def model_flags(paths, **overrides):
 
 def test_report_and_pictures_on_saved_models(saved):
     workdir, paths = saved
-    result = run_script("copycat_analysis.py", *model_flags(paths), "--num-samples", 300, "--episodes", 1, "--out-dir", "out", cwd=workdir)
+    result = run_script("copycat_analysis.py", *model_flags(paths), "--num-demo-samples", 300, "--eval-episodes", 1, "--output-dir", "out", cwd=workdir)
     assert result.returncode == 0, result.stderr
     assert "copycat score" in result.stdout and "do(zeta)" in result.stdout
     report = json.loads((workdir / "out" / "copycat_analysis.json").read_text())
@@ -195,7 +195,7 @@ def bad_run(workdir, paths, monkeypatch, **settings):
     monkeypatch.chdir(workdir)
     models = {method: str(settings.pop(method, paths[method])) for method in ca.METHODS}
     with pytest.raises(ca.UsageError) as error:
-        ca.run(ca.Args(**models, **{"num_samples": 300, "episodes": 1, "out_dir": "bad", **settings}))
+        ca.run(ca.Args(**models, **{"num_demo_samples": 300, "eval_episodes": 1, "output_dir": "bad", **settings}))
     assert not (workdir / "bad").exists(), "nothing is written on bad input"
     return str(error.value)
 
