@@ -171,7 +171,7 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
@@ -575,7 +575,7 @@ def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: n
     for d in range(effect.shape[1]):
         top.plot(effect[:, d] / (hi[d] - lo[d]), lw=1, label=f"{names[d]}: do(zeta) = {lo[d]:.2f} vs {hi[d]:.2f}")
     top.set_ylabel("CE / (hi - lo)")
-    if late_fusion:  # the paper's model: one linear layer after the join, so the effect is a weight of it
+    if late_fusion:  # late or output fusion: one linear layer after the join, so the effect is a weight of it
         fig.text(0.01, 0.01, "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = |its weight on zeta_d| wherever the "
                  "action is not clipped at its bounds (dips: clipped)", fontsize=8)
     top.set_title(f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta")
@@ -685,13 +685,13 @@ def run(args):
 
     out_dir = args.output_dir.format(env=args.env)
     plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"],
-                     saved["c2f"]["fusion"] == "late")
+                     saved["c2f"]["fusion"] in ("late", "output"))
     plot_history_intervention(os.path.join(out_dir, "history_intervention.png"), args.env, changes)
-    summary = {"env": args.env, "args": asdict(args), "history": history, "obs_noise_std": std, "demo_steps": len(actions),
+    summary = {"env": args.env, "args": asdict(args), "history": history, "obs_noise_std": std, "frame_skip": frame_skip, "hide_velocities": hide, "demo_steps": len(actions),
                "changepoints": len(points), "action_std": scale.tolist(), "methods": report, "zeta": zeta}
     write_atomically(os.path.join(out_dir, "copycat_analysis.json"), lambda file: file.write(json.dumps(summary, indent=1).encode()))
 
-    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, noise std {std}, history {history}")
+    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, {'velocities hidden' if hide else f'noise std {std}'}, history {history}, frame skip {frame_skip or 'native'}")
     print("do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}")
     print(f"{'method':>6} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
     for method, row in report.items():

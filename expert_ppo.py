@@ -37,7 +37,7 @@ class Args:
     frame_skip: Optional[int] = None
     """simulator steps per action (default: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant); episodes and rewards are rescaled to the same simulated time and return scale"""
     seed: int = 1
-    """seed of the run (python, numpy, torch and the envs)"""
+    """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed, where the method files' --seeds lists runs"""
     total_timesteps: int = 3_000_000
     """env steps to train for, summed over the parallel envs"""
     learning_rate: float = 3e-4
@@ -64,16 +64,16 @@ class Args:
     """gradient-norm clipping"""
     hidden: int = 64
     """width of the two tanh hidden layers of actor and critic"""
-    run_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
+    output_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
     """where training writes latest.pt (to resume) and best.pt (best periodic evaluation); {rate} is empty at the env's own frame skip and _fsK at --frame-skip K, so runs at other rates do not overwrite it"""
-    save_every: int = 100_000
+    save_every_steps: int = 100_000
     """write latest.pt every this many env steps"""
-    eval_every: int = 250_000
-    """evaluate the deterministic policy every this many env steps and keep the best as best.pt"""
+    eval_every_steps: int = 250_000
+    """evaluate the deterministic policy every this many env steps (the method files' --eval-every counts epochs) and keep the best as best.pt"""
     train_eval_episodes: int = 5
     """episodes of each periodic evaluation during training"""
     resume: bool = False
-    """continue from run-dir/latest.pt when it exists (start fresh otherwise)"""
+    """continue from output-dir/latest.pt when it exists (start fresh otherwise)"""
     max_minutes: float = 0.0
     """stop cleanly (checkpoint written) after this many minutes; 0 = no limit. Resume later."""
     threads: int = 1
@@ -197,7 +197,7 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
@@ -303,7 +303,7 @@ def eval_only(args: Args):
 
 
 def validate(args: Args):
-    for name in ("total_timesteps", "num_envs", "num_steps", "num_minibatches", "update_epochs", "hidden", "save_every", "eval_every", "train_eval_episodes", "eval_episodes", "threads"):
+    for name in ("total_timesteps", "num_envs", "num_steps", "num_minibatches", "update_epochs", "hidden", "save_every_steps", "eval_every_steps", "train_eval_episodes", "eval_episodes", "threads"):
         if getattr(args, name) <= 0:
             raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     for name in ("learning_rate", "clip_coef", "max_grad_norm"):
@@ -322,8 +322,8 @@ def train(args: Args):
     # make_env(env, native) is the plain gym.make(env), so the default run is the same as before the flag.
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
     rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
-    run_dir = args.run_dir.format(env=args.env, seed=args.seed, rate=rate)
-    latest_path, best_path = os.path.join(run_dir, "latest.pt"), os.path.join(run_dir, "best.pt")
+    output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
+    latest_path, best_path = os.path.join(output_dir, "latest.pt"), os.path.join(output_dir, "best.pt")
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
@@ -348,16 +348,18 @@ def train(args: Args):
         except Exception as error:
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
         if trained_on != args.env:
-            raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --run-dir")
+            raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --output-dir")
         # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
         if trained_at != args.frame_skip:
-            raise UsageError(f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --run-dir")
+            raise UsageError(f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --output-dir")
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
+        # state["args"] is a record only, never read back: checkpoints written under older flag names
+        # (run_dir, eval_every, save_every) resume, and the run goes on with the flags given now.
         obs_rms.mean, obs_rms.var, obs_rms.count = state["obs_mean"].numpy(), state["obs_var"].numpy(), state["obs_count"]
         ret_rms.mean, ret_rms.var, ret_rms.count = state["ret_mean"].numpy(), state["ret_var"].numpy(), state["ret_count"]
         global_step, best_return = state["global_step"], state["best_return"]
@@ -381,7 +383,7 @@ def train(args: Args):
     discounted_return = np.zeros(args.num_envs)  # for reward scaling, as gymnasium's NormalizeReward
     episode_return, episode_length, recent_returns = np.zeros(args.num_envs), np.zeros(args.num_envs, int), []
     start_time, start_step = time.time(), global_step
-    next_save, next_eval = global_step + args.save_every, global_step + args.eval_every
+    next_save, next_eval = global_step + args.save_every_steps, global_step + args.eval_every_steps
     stopped_early = False
 
     while global_step < args.total_timesteps:
@@ -449,14 +451,14 @@ def train(args: Args):
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
         print(f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
         if global_step >= next_eval:
-            next_eval += args.eval_every
+            next_eval += args.eval_every_steps
             eval_return = float(np.mean(evaluate(frozen_policy(), args.env, args.train_eval_episodes, seed=args.seed + global_step, frame_skip=args.frame_skip)))
             print(f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True)
             if eval_return > best_return:
                 best_return = eval_return
                 save_atomically(checkpoint(eval_return), best_path)
         if global_step >= next_save:
-            next_save += args.save_every
+            next_save += args.save_every_steps
             save_atomically(checkpoint(), latest_path)
         if args.max_minutes and elapsed > args.max_minutes * 60 and global_step < args.total_timesteps:
             stopped_early = True

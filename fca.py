@@ -384,7 +384,7 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}` or pass --checkpoint")
+        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]

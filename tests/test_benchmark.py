@@ -173,6 +173,20 @@ def test_expert_is_evaluated_once_per_env_into_the_same_json_shape(scripts, tmp_
     assert "eval_episodes 4 != 5" in capsys.readouterr().out  # another episode count is another run
 
 
+def test_expert_command_is_one_the_real_expert_ppo_accepts(scripts, tmp_path):
+    """The stand-in expert_ppo.py above ignores its flags: the runner's expert command must parse with the real one's."""
+    import tyro
+
+    import expert_ppo
+
+    options = run_grid.parse_options(["--scripts-dir", str(scripts), "--results-dir", str(tmp_path), "--methods", "expert",
+                                      "--envs", "Ant-v4", "--expert-episodes", "7"])
+    python, script, *flags = run_grid.command(run_grid.Run("expert", "Ant-v4", run_grid.EXPERT_SEED), options)
+    assert script == "expert_ppo.py"
+    args = tyro.cli(expert_ppo.Args, args=flags)  # an unknown flag would exit 2 here
+    assert (args.eval_only, args.env, args.checkpoint, args.eval_episodes) == (True, "Ant-v4", "experts/Ant-v4.pt", 7)
+
+
 def test_slurm_script_names_every_combination_exactly_once(scripts, tmp_path, capsys):
     results, script = tmp_path / "runs", tmp_path / "grid.sbatch"
     assert grid(scripts, results, "--methods", "fake", "expert", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1, 2, 3,

@@ -243,3 +243,25 @@ def test_models_of_different_history_lengths_are_refused():
     saved["c2f"]["history"] = 3
     with pytest.raises(ca.UsageError, match=r"different --history .*'bc_oh': 2, 'c2f': 3.*one history length"):
         ca.agreed(saved, "history", "--history", ("bc_oh", "c2f"), "pass models trained with one history length")
+
+
+def test_models_of_another_control_rate_and_hidden_velocities_are_analysed_at_their_setting(tmp_path):
+    """The analysis takes the rate and the kind of partial observability from the models; models that
+    disagree on them are refused."""
+    workdir = link_experts(tmp_path)
+    budget = ["--epochs", "1", "--num-demo-samples", "300", "--eval-episodes", "1", "--seeds", "1", "--save-model", "--frame-skip", "1"]
+    cwd = os.getcwd()
+    os.chdir(workdir)
+    try:
+        for method in ca.METHODS:
+            script = importlib.import_module(method)
+            script.run(tyro.cli(script.Args, args=[*budget, "--hide-velocities", "--output-dir", f"models/{method}"]))
+        paths = {method: workdir / "models" / method / "seed1.pt" for method in ca.METHODS}
+        ca.run(ca.Args(**{m: str(p) for m, p in paths.items()}, num_demo_samples=300, eval_episodes=1, output_dir="out"))
+        report = json.loads((workdir / "out" / "copycat_analysis.json").read_text())
+        assert (report["frame_skip"], report["hide_velocities"]) == (1, True)
+        importlib.import_module("bc_so").run(tyro.cli(importlib.import_module("bc_so").Args, args=[*budget, "--output-dir", "models/native"]))
+        with pytest.raises(ca.UsageError, match="different --hide-velocities"):
+            ca.run(ca.Args(**{**{m: str(p) for m, p in paths.items()}, "bc_so": "models/native/seed1.pt"}, num_demo_samples=300, eval_episodes=1))
+    finally:
+        os.chdir(cwd)

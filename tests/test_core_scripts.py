@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-import bc_so
 import c2f
 from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
 

@@ -8,10 +8,10 @@ import pytest
 import torch
 
 import expert_ppo
-from conftest import REPO_ROOT, assert_usage_error, run_script
+from conftest import REPO_ROOT, assert_usage_error, run_in_process, run_script
 
-TINY = ["--num-envs", 2, "--num-steps", 512, "--num-minibatches", 4, "--update-epochs", 1, "--eval-every", 2048,
-        "--save-every", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]
+TINY = ["--num-envs", 2, "--num-steps", 512, "--num-minibatches", 4, "--update-epochs", 1, "--eval-every-steps", 2048,
+        "--save-every-steps", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]
 SUMMARY = re.compile(r"^Hopper-v4 expert: (-?\d+\.\d) ± (\d+\.\d) over (\d+) episodes$")
 SHIPPED_EXPERT = REPO_ROOT / "experts" / "Hopper-v4.pt"
 
@@ -32,7 +32,7 @@ def load(path):
 def tiny_run(tmp_path_factory):
     """One tiny Hopper-v4 training run of 4096 steps, shared by the tests of this file (do not modify)."""
     run_dir = tmp_path_factory.mktemp("tiny_run")
-    result = run_script("expert_ppo.py", "--total-timesteps", 4096, *TINY, "--run-dir", run_dir)
+    result = run_script("expert_ppo.py", "--total-timesteps", 4096, *TINY, "--output-dir", run_dir)
     return run_dir, result
 
 
@@ -86,13 +86,19 @@ def test_resume_continues_from_the_checkpoint(tiny_run, tmp_path):
     run_dir = tmp_path / "run"
     shutil.copytree(tiny_run[0], run_dir)
     before = load(run_dir / "latest.pt")
-    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--run-dir", run_dir, "--resume")
+    # a checkpoint written before the flags were renamed records its args under the old names: it resumes
+    old_names = {"output_dir": "run_dir", "eval_every_steps": "eval_every", "save_every_steps": "save_every"}
+    old = dict(before, args={old_names.get(name, name): value for name, value in before["args"].items()})
+    assert {"run_dir", "eval_every", "save_every"} <= set(old["args"]) and "output_dir" not in old["args"]
+    torch.save(old, run_dir / "latest.pt")
+    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--output-dir", run_dir, "--resume")
     summary(result)
     assert f"resumed from {run_dir / 'latest.pt'} at step 4096" in result.stdout
     after = load(run_dir / "latest.pt")
     assert after["global_step"] == 6144
     # the observation statistics went on from the checkpoint's (4096 + 2048 observations), not from scratch
     assert after["obs_count"] == pytest.approx(before["obs_count"] + 2048)
+    assert after["args"]["output_dir"] == str(run_dir) and "run_dir" not in after["args"]  # recorded under today's names
 
 
 def test_shipped_expert_scores_well():
@@ -126,10 +132,21 @@ def test_shipped_expert_scores_well():
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
     args = [str(arg).format(tiny=checkpoint) for arg in args]
-    result = run_script("expert_ppo.py", *args, "--run-dir", tmp_path / "run", cwd=tmp_path)
+    result = run_script("expert_ppo.py", *args, "--output-dir", tmp_path / "run", cwd=tmp_path)
     assert_usage_error(result, message)
     assert result.returncode == 2
     assert not (tmp_path / "run").exists()  # failed before training started
+
+
+@pytest.mark.parametrize("old, new", [("--run-dir", "--output-dir"), ("--eval-every", "--eval-every-steps"), ("--save-every", "--save-every-steps")])
+def test_renamed_flags_are_gone(old, new):
+    """The flags speak the method files' vocabulary: --output-dir as theirs; counts of env steps say so, since
+    their --eval-every counts epochs. The old names are unknown flags (tyro's error, exit 2), not aliases."""
+    result = run_in_process("expert_ppo.py", old, "x")
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    assert f"Unrecognized options: {old}" in " ".join(re.sub(r"[│╭╮╰╯─|+]", " ", result.stderr).split())
+    help_text = run_in_process("expert_ppo.py", "--help").stdout
+    assert re.search(rf"{new} (STR|INT)\b", help_text) and not re.search(rf"{old} (STR|INT)\b", help_text)
 
 
 @pytest.fixture
@@ -184,7 +201,8 @@ def fs1_run(tmp_path_factory):
         return made[-1]
 
     args = expert_ppo.Args(env="Hopper-v4", frame_skip=1, total_timesteps=1024, num_envs=2, num_steps=512, num_minibatches=4,
-                           update_epochs=1, eval_every=2048, save_every=2048, train_eval_episodes=1, eval_episodes=1, run_dir=str(run_dir))
+                           update_epochs=1, eval_every_steps=2048, save_every_steps=2048, train_eval_episodes=1, eval_episodes=1,
+                           output_dir=str(run_dir))
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(expert_ppo, "make_env", counting_make_env)
         expert_ppo.train(args)
@@ -235,7 +253,7 @@ def test_resume_at_another_frame_skip_is_refused(tiny_run, tmp_path):
     run_dir = tmp_path / "run"
     shutil.copytree(tiny_run[0], run_dir)
     before = (run_dir / "latest.pt").read_bytes()
-    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--run-dir", run_dir, "--resume", "--frame-skip", 1)
+    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--output-dir", run_dir, "--resume", "--frame-skip", 1)
     assert_usage_error(result, "was trained at frame skip 4, not 1")
     assert result.returncode == 2
     assert (run_dir / "latest.pt").read_bytes() == before

@@ -85,11 +85,40 @@ def test_set_learning_rate_in_place_for_tensor_and_float_lr():
 
 
 def test_cpu_training_never_uses_the_graph(monkeypatch, capsys):
-    """--cuda-graph is the default, but without a GPU the plain eager step runs (no capture attempted)."""
+    """--cuda --cuda-graph asked for, but training on the CPU device: the step is a disabled CudaGraphStep, the
+    plain eager step, and nothing of torch.cuda is touched (any stream, graph or capture raises here)."""
+    touched = []
+
+    def no_cuda(name):
+        def refuse(*args, **kwargs):
+            touched.append(name)
+            raise AssertionError(f"torch.cuda.{name} used while training on the CPU")
+        return refuse
+
+    for name in ("CUDAGraph", "graph", "Stream", "current_stream", "stream"):
+        monkeypatch.setattr(torch.cuda, name, no_cuda(name))
+    steps, losses = [], []
+
+    class RecordingStep(bc_oh.CudaGraphStep):
+        def __init__(self, step, enabled, **kwargs):
+            super().__init__(step, enabled, **kwargs)
+            steps.append(self)
+
+        def __call__(self):
+            loss = super().__call__()
+            losses.append(loss.item())
+            return loss
+
+    monkeypatch.setattr(bc_oh, "CudaGraphStep", RecordingStep)
     skip_evaluation(monkeypatch, bc_oh)
-    monkeypatch.setattr(torch.cuda, "CUDAGraph", lambda: pytest.fail("captured a CUDA graph on the CPU"))
-    result = bc_oh.train_seed(tiny_args(bc_oh), fake_demos(), 1, torch.device("cpu"))
-    assert result["ms_per_step"] > 0
+    args = tiny_args(bc_oh, cuda=True, cuda_graph=True)
+    result = bc_oh.train_seed(args, fake_demos(), 1, torch.device("cpu"))
+    assert touched == []
+    assert len(steps) == 1 and not steps[0].enabled and steps[0].graph is None
+    assert len(losses) == args.epochs * (256 // args.batch_size)  # every step ran, eagerly
+    assert torch.isfinite(torch.tensor(losses)).all() and len(set(losses)) > 1  # real, changing losses
+    assert f"epoch 2/2 | loss {losses[-1]:.5f} |" in capsys.readouterr().out  # the eager step's loss is the one reported
+    assert [epoch for epoch, _ in result["evaluations"]] == [1, 2]
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU: the fast path captures CUDA graphs")

@@ -1,0 +1,33 @@
+"""How much a reader has to read: each method file's length and how far it is from bc_oh.py.
+
+    python scripts/file_sizes.py          # a markdown table, as in the README's file list
+
+Lines = `wc -l`; diff = the lines `diff -I '^# Copied from' bc_oh.py FILE` marks with < or > (what
+`diff bc_oh.py FILE` shows a reader, copy markers aside); targets from the teaching-grade issue.
+"""
+import re
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = {"bc_oh": (330, None), "bc_so": (400, 20), "history_dropout": (400, 15), "c2f": (400, 80), "fca": (400, 100),
+           "keyframe": (400, 100), "average_ensemble": (400, 100), "dagger": (400, 120)}
+"""method file -> (most lines, most diff lines against bc_oh.py)"""
+
+
+def diff_lines(name: str) -> int:
+    diff = subprocess.run(["diff", "-I", "^# Copied from", str(ROOT / "bc_oh.py"), str(ROOT / f"{name}.py")], capture_output=True, text=True)
+    return len(re.findall(r"^[<>]", diff.stdout, re.M))
+
+
+def main():
+    print("| file | lines (target) | diff vs bc_oh.py (target) |")
+    print("|---|---:|---:|")
+    for name, (most_lines, most_diff) in TARGETS.items():
+        lines = len((ROOT / f"{name}.py").read_text().splitlines())
+        diff = "—" if most_diff is None else f"{diff_lines(name)} ({most_diff})"
+        print(f"| `{name}.py` | {lines} ({most_lines}) | {diff} |")
+
+
+if __name__ == "__main__":
+    main()
