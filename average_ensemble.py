@@ -430,16 +430,27 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
     if demo_meta(path).get("frame_skip", native) != frame_skip:
         raise UsageError(f"{path} was recorded at frame skip {demo_meta(path)['frame_skip']}, this run is at {frame_skip}: pass --frame-skip {demo_meta(path)['frame_skip']} or demos of this rate")
+    meaning = {"observations": "o_t per step, (N, obs_dim)", "actions": "the expert's a_t, (N, act_dim)", "episode_starts": "True where an episode starts, (N,)"}
     try:
         with np.load(path, allow_pickle=False) as data:
-            demos = {key: data[key] for key in ("observations", "actions", "episode_starts")}
+            missing = [key for key in meaning if key not in data]
+            demos = {key: data[key] for key in meaning if key in data}
     except Exception as error:
         raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
-    n = len(demos["actions"])
+    if missing:
+        raise UsageError(f"{path} has no {missing[0]!r} array ({meaning[missing[0]]}): see the .npz format in README.md")
+    n = len(demos["actions"]) if demos["actions"].ndim else 0
     if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
         raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
     if n <= args.batch_size:
         raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
+    for key, dtype in (("observations", np.float64), ("actions", np.float32)):  # any real dtype converts
+        if not (np.issubdtype(demos[key].dtype, np.integer) or np.issubdtype(demos[key].dtype, np.floating) or demos[key].dtype == bool):
+            raise UsageError(f"{path}: {key} hold {demos[key].dtype} values, not real numbers: save them as floats")
+        demos[key] = demos[key].astype(dtype)
+        bad = np.argwhere(~np.isfinite(demos[key]))
+        if len(bad):
+            raise UsageError(f"{path}: {key} has the non-finite value {demos[key][tuple(bad[0])]} at row {bad[0][0]}, column {bad[0][1]}: fix or drop that step")
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
     demos["episode_starts"][0] = True
     print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "

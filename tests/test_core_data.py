@@ -173,3 +173,51 @@ def test_mujoco_deprecation_warning_of_halfcheetah_is_dropped_and_others_kept(tm
     assert "settotalmass" not in "".join(capfd.readouterr()) and not (tmp_path / "MUJOCO_LOG.TXT").exists()
     mujoco.get_mju_user_warning()("something else")
     assert capfd.readouterr().err == "MuJoCo warning: something else\n"
+
+
+# ----------------------------------------------------------------------------------------------
+# Demo files a user's own converter may produce
+
+
+def user_demo_file(tmp_path, drop=None, **arrays):
+    """A Hopper-shaped demo file of 200 steps, with `arrays` replacing (or `drop` removing) entries."""
+    rng = np.random.default_rng(0)
+    content = {"observations": rng.normal(size=(200, 11)), "actions": rng.uniform(-1, 1, (200, 3)).astype(np.float32),
+               "episode_starts": np.arange(200) % 50 == 0, **arrays}
+    content.pop(drop, None)
+    path = tmp_path / "user.npz"
+    np.savez(path, **content)
+    return str(path)
+
+
+def load_user_demos(path):
+    return bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos=path), bc_oh.make_env("Hopper-v4"))
+
+
+def test_demos_of_any_real_dtype_are_converted(tmp_path):
+    integer = np.arange(200 * 11).reshape(200, 11) % 7
+    demos = load_user_demos(user_demo_file(tmp_path, observations=integer, actions=np.zeros((200, 3), np.int32),
+                                           episode_starts=(np.arange(200) % 50 == 0).astype(np.int8)))
+    assert demos["observations"].dtype == np.float64 and demos["actions"].dtype == np.float32 and demos["episode_starts"].dtype == bool
+    assert np.array_equal(demos["observations"], integer) and demos["episode_starts"].sum() == 4
+    noisy = bc_oh.partially_observe(demos["observations"], HOPPER_VELOCITIES, 0.2, False, seed=1)  # no casting error
+    assert noisy.dtype == np.float64
+
+
+@pytest.mark.parametrize("key, row, column", [("observations", 17, 4), ("actions", 150, 2)])
+def test_a_non_finite_demo_value_is_refused_with_its_place(tmp_path, key, row, column):
+    rng = np.random.default_rng(0)
+    values = rng.normal(size=(200, 11 if key == "observations" else 3))
+    values[row, column] = np.nan
+    with pytest.raises(bc_oh.UsageError, match=rf"{key} has the non-finite value nan at row {row}, column {column}"):
+        load_user_demos(user_demo_file(tmp_path, **{key: values}))
+
+
+def test_a_missing_demo_array_is_named_with_its_meaning(tmp_path):
+    with pytest.raises(bc_oh.UsageError, match=r"has no 'episode_starts' array \(True where an episode starts, \(N,\)\)"):
+        load_user_demos(user_demo_file(tmp_path, drop="episode_starts"))
+
+
+def test_demos_of_text_are_refused(tmp_path):
+    with pytest.raises(bc_oh.UsageError, match="actions hold <U1 values, not real numbers"):
+        load_user_demos(user_demo_file(tmp_path, actions=np.full((200, 3), "a")))
