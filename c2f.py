@@ -108,7 +108,8 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """C2F: the coarse model on o_t gives zeta; the policy model on the history, joined by sg(zeta), the final action."""
+    """C2F (section 8.3): a coarse MLP on o_t gives an action zeta; a three-layer policy MLP on the history
+    gives a feature; one more linear layer maps [feature, sg(zeta)] to the final action."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
                  coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True):
@@ -116,6 +117,7 @@ class Policy(nn.Module):
         self.normalize = Normalizer(inputs)
         self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
         self.coarse_input, self.policy_input = coarse_input, policy_input
+        self.ablation = (fusion, coarse_output, coarse_input, policy_input, stop_gradient) != ("late", "action", "current", "history", True)
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
         extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "output")}
@@ -128,10 +130,6 @@ class Policy(nn.Module):
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + extra["late"] + extra["output"], act_dim)  # the one more linear layer of the paper
 
-    def pick(self, x, which: str):
-        """The normalised history itself, or its last frame o_t."""
-        return x if which == "history" else x[:, -self.obs_dim:]
-
     def coarse_model(self, obs_history):
         """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
         feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
@@ -139,6 +137,22 @@ class Policy(nn.Module):
 
     def coarse_and_final(self, obs_history):
         """(zeta, final action = pi_theta(history, sg(zeta))): the two outputs Eq. 2 trains."""
+        if self.ablation:
+            return self.ablated_coarse_and_final(obs_history)
+        zeta = self.coarse_model(obs_history)[0]
+        feature = self.policy_rest(self.policy_first(self.normalize(obs_history)))
+        return zeta, self.head(torch.cat([feature, zeta.detach()], dim=1))
+
+    def forward(self, obs_history):
+        return self.coarse_and_final(obs_history)[1]
+
+    # ---- Table 3's ablations (and --fusion output): each flag changes only what it names ----
+
+    def pick(self, x, which: str):
+        """The normalised history itself, or its last frame o_t."""
+        return x if which == "history" else x[:, -self.obs_dim:]
+
+    def ablated_coarse_and_final(self, obs_history):
         zeta, feature = self.coarse_model(obs_history)
         fed = feature if self.coarse_output == "feature" else zeta
         fed = fed.detach() if self.stop_gradient else fed
@@ -146,9 +160,6 @@ class Policy(nn.Module):
         h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
         return zeta, self.head(join(join(h, "late"), "output"))
-
-    def forward(self, obs_history):
-        return self.coarse_and_final(obs_history)[1]
 
 
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:

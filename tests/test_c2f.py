@@ -234,3 +234,20 @@ def test_bc_so_result_does_not_depend_on_history(monkeypatch, capsys):
     three, three_lines = train(bc_so, monkeypatch, capsys, history=3)
     assert without_timing(one_lines) == without_timing(three_lines)
     assert all(torch.equal(one[name], three[name]) for name in one)
+
+
+def test_the_paper_path_is_the_general_path_at_the_paper_flags():
+    """The default model reads as the paper's (plain lines); the ablation section's general path, run on the
+    same model, gives exactly the same outputs and the same gradients."""
+    policy, (obs_history, target) = model(), batch()
+    assert not policy.ablation and all(model(**{name: value}).ablation for name, value in
+                                       [("fusion", "output"), ("coarse_input", "history"), ("stop_gradient", False)])
+    plain, general = policy.coarse_and_final(obs_history), policy.ablated_coarse_and_final(obs_history)
+    assert all(torch.equal(a, b) for a, b in zip(plain, general))
+    gradients = []
+    for outputs in (policy.coarse_and_final, policy.ablated_coarse_and_final):
+        policy.zero_grad()
+        zeta, final = outputs(obs_history)
+        (((final - target) ** 2).mean() + ((zeta - target) ** 2).mean()).backward()
+        gradients.append([p.grad.clone() for p in policy.parameters()])
+    assert all(torch.equal(a, b) for a, b in zip(*gradients))
