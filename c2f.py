@@ -426,19 +426,26 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 
 # Copied from bc_oh.generate_demos
 def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early."""
-    env, obs_list, action_list, starts = make_env(env_id, frame_skip), [], [], []
+    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
+    Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
+    step's reward, termination and truncation, and each episode's observation after its last step."""
+    env, steps, final_observations = make_env(env_id, frame_skip), [], []
     obs, _ = env.reset(seed=seed)
     start = True
-    for _ in range(num_samples):
+    for step in range(num_samples):
         action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
-        obs_list.append(obs), action_list.append(action), starts.append(start)
-        obs, _, terminated, truncated, _ = env.step(action)
-        start = terminated or truncated
+        next_obs, reward, terminated, truncated, _ = env.step(action)
+        truncated = truncated or step == num_samples - 1  # the budget ends the last episode
+        steps.append((obs, action, start, reward, terminated, truncated))
+        obs, start = next_obs, terminated or truncated
         if start:
+            final_observations.append(next_obs)
             obs, _ = env.reset()
     env.close()
-    return {"observations": np.array(obs_list, np.float64), "actions": np.array(action_list, np.float32), "episode_starts": np.array(starts)}
+    observations, actions, starts, rewards, terminations, truncations = zip(*steps)
+    return {"observations": np.array(observations, np.float64), "actions": np.array(actions, np.float32), "episode_starts": np.array(starts),
+            "rewards": np.array(rewards, np.float64), "terminations": np.array(terminations), "truncations": np.array(truncations),
+            "final_observations": np.array(final_observations, np.float64)}
 
 
 # Copied from bc_oh.demo_meta

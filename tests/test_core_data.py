@@ -221,3 +221,16 @@ def test_a_missing_demo_array_is_named_with_its_meaning(tmp_path):
 def test_demos_of_text_are_refused(tmp_path):
     with pytest.raises(bc_oh.UsageError, match="actions hold <U1 values, not real numbers"):
         load_user_demos(user_demo_file(tmp_path, actions=np.full((200, 3), "a")))
+
+
+def test_demos_record_what_a_dataset_format_needs():
+    """Rewards, terminations and truncations per step, and each episode's final observation: an episode
+    ends exactly where the next starts, and the budget truncates the last one."""
+    demos = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 1200)
+    ends = demos["terminations"] | demos["truncations"]
+    assert np.array_equal(ends[:-1], demos["episode_starts"][1:]) and ends[-1] and demos["truncations"][-1]
+    assert len(demos["final_observations"]) == ends.sum() == demos["episode_starts"].sum()
+    env = gym.make("Hopper-v4")  # the first step's reward, replayed
+    env.reset(seed=0)
+    assert demos["rewards"][0] == env.step(demos["actions"][0])[1]
+    assert demos["rewards"].dtype == np.float64 and demos["final_observations"].shape[1] == 11
