@@ -5,7 +5,8 @@
 Reads every <results-dir>/<method>/<env>/result_seeds*.json and writes
 - <out>/mujoco.csv: env,method,seed,score, score = mean return of the seed's last three evaluations;
 - <out>/table2.md: mean ± std over seeds per method and env, the paper's number beside it, seeds per cell;
-- <out>/table2.png: the same as bars with error bars, paper beside ours, one panel per env.
+- <out>/table2.png: the same as bars with error bars, paper beside ours, one panel per env;
+- <out>/curves.png: each method's evaluation return against epoch (mean over seeds, min-max band), one panel per env.
 Corrupt or partial results, and runs at settings other than the paper's (unless --allow-nonpaper), are
 reported on stderr, naming the file, and left out.
 """
@@ -15,6 +16,7 @@ import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 from benchmark.paper import METHOD_NAMES, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
@@ -34,6 +36,8 @@ class Record:
     """the expert only: episodes of its evaluation"""
     differences: list = field(default_factory=list)
     """how its settings differ from the paper's (empty at the paper's settings)"""
+    evaluations: list = field(default_factory=list)
+    """the seed's evaluation curve, [[epoch, mean return], ...] (the expert: one, at epoch 0)"""
 
 
 @dataclass
@@ -60,7 +64,8 @@ def collect(results_dir: Path, allow_nonpaper: bool):
             problems.append(f"left out {path}: not the paper's settings ({', '.join(differences)}); --allow-nonpaper includes it")
             continue
         for seed, entry in result["scores"].items():
-            record = Record(method, env, int(seed), seed_score(entry["evaluations"]), path, differences=differences)
+            record = Record(method, env, int(seed), seed_score(entry["evaluations"]), path, differences=differences,
+                            evaluations=entry["evaluations"])
             if method == EXPERT:
                 record.episode_std, record.episodes = result["std"], result["args"].get("eval_episodes")
             key = (method, env, record.seed)
@@ -76,6 +81,9 @@ def ordered(names, order) -> list:
     return sorted(set(names), key=lambda name: (order.index(name) if name in order else len(order), name))
 
 
+ENV_ORDER = [f"{family}-v4" for family in PAPER_ENV_ORDER]
+
+
 def summarise(records: list) -> Cell:
     scores = [record.score for record in records]
     if records[0].method == EXPERT:  # one deterministic evaluation: its spread is over episodes
@@ -85,8 +93,8 @@ def summarise(records: list) -> Cell:
 
 def build_table(records: list):
     """(methods, envs, ours[(method, env)] -> Cell): rows = the paper's methods and any others we ran."""
-    envs = ordered([r.env for r in records], [f"{family}-v4" for family in PAPER_ENV_ORDER])
-    methods = ordered(list(METHOD_NAMES) + [r.method for r in records], list(METHOD_NAMES))
+    envs = ordered([r.env for r in records], ENV_ORDER)
+    methods = ordered(list(PAPER_TABLE2) + [r.method for r in records], list(METHOD_NAMES))  # the paper's rows and any we ran
     ours = {}
     for method in methods:
         for env in envs:
@@ -168,9 +176,96 @@ def plot(records: list, path: Path):
     axes[0][0].legend()
     figure.suptitle("Table 2: ours (mean ± std over seeds) beside the paper's")
     figure.tight_layout()
+    save_figure(figure, path)
+
+
+def save_figure(figure, path: Path):
+    """Write a matplotlib figure to path atomically as PNG, and free it."""
+    import matplotlib.pyplot as plt
+
     with written_atomically(path) as tmp:
         figure.savefig(tmp, dpi=120)
     plt.close(figure)
+
+
+class Curve(NamedTuple):
+    """One method's learning curve on one env: at each epoch the mean, lowest and highest evaluation return over seeds."""
+    epochs: list
+    mean: list
+    low: list
+    high: list
+
+
+def curves(records: list) -> dict:
+    """{env: {method: Curve}} for every env and method with records, the expert left out (it has one evaluation, no
+    curve); envs and methods in the paper's order."""
+    cells = {}
+    for record in records:
+        if record.method != EXPERT:
+            cells.setdefault(record.env, {}).setdefault(record.method, []).append(dict(record.evaluations))
+    result = {}
+    for env in ordered(cells, ENV_ORDER):
+        for method in ordered(cells[env], list(METHOD_NAMES)):
+            seeds = cells[env][method]
+            # Seeds evaluated at other epochs than the rest of the cell (another --epochs or evaluation interval) are
+            # grouped by epoch: only the epochs present in every seed of the cell are averaged, the others are left out.
+            epochs = sorted(set.intersection(*map(set, seeds)))
+            if epochs:
+                returns = [[seed[epoch] for seed in seeds] for epoch in epochs]
+                result.setdefault(env, {})[method] = Curve(epochs, *(list(map(f, returns)) for f in (statistics.fmean, min, max)))
+    return result
+
+
+def expert_scores(records: list) -> dict:
+    """{env: the expert's score} for the envs whose expert record is among records."""
+    scores = {}
+    for record in records:
+        if record.method == EXPERT:
+            scores.setdefault(record.env, []).append(record.score)
+    return {env: statistics.fmean(values) for env, values in scores.items()}
+
+
+def plot_curves(records: list, path: Path, experts=None, title="Learning curves") -> bool:
+    """One panel per env: each method's evaluation return against epoch, the mean over seeds as a line and the
+    lowest to highest seed as a band, one colour per method; the expert's score (experts {env: score}, by default the
+    expert records among records) as a dashed line. False, and nothing written, when no record has a curve."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    data = curves(records)
+    experts = expert_scores(records) if experts is None else experts
+    if not data:
+        return False
+    methods = ordered([method for cell in data.values() for method in cell], list(METHOD_NAMES))
+    columns = min(len(data), 2)
+    rows = -(-len(data) // columns)
+    legend_height = 0.8  # inches below the panels for the legend (two rows of it)
+    figure, axes = plt.subplots(rows, columns, figsize=(6.4 * columns, 4.2 * rows + legend_height), squeeze=False)
+    for axis, (env, cell) in zip(axes.flat, data.items()):
+        for method, curve in cell.items():
+            color = f"C{methods.index(method) % 10}"
+            axis.plot(curve.epochs, curve.mean, color=color, linewidth=1.6)
+            axis.fill_between(curve.epochs, curve.low, curve.high, color=color, alpha=0.15, linewidth=0)
+        if env in experts:
+            axis.axhline(experts[env], color="black", linestyle="--", linewidth=1.2)
+        axis.set_title(env)
+        axis.set_xlabel("epoch")
+        axis.set_ylabel("evaluation return")
+        axis.grid(alpha=0.3)
+    for axis in axes.flat[len(data):]:
+        axis.set_visible(False)
+    legend = [Line2D([], [], color=f"C{i % 10}", linewidth=1.6, label=METHOD_NAMES.get(m, m)) for i, m in enumerate(methods)]
+    if set(experts) & set(data):
+        legend.append(Line2D([], [], color="black", linestyle="--", linewidth=1.2, label=METHOD_NAMES[EXPERT]))
+    figure.legend(handles=legend, loc="lower center", ncol=min(len(legend), 5))
+    figure.suptitle(f"{title}: mean over seeds (line), lowest to highest seed (band)"
+                    + (", expert's score (dashed)" if len(legend) > len(methods) else ""))
+    figure.tight_layout(rect=(0, legend_height / figure.get_figheight(), 1, 1))
+    save_figure(figure, path)
+    return True
 
 
 README_START, README_END = "<!-- table2 -->", "<!-- /table2 -->"
@@ -186,11 +281,13 @@ def readme_parts(readme: Path, start=README_START, end=README_END) -> tuple:
     return text[:text.index(start) + len(start)], text[text.index(end):]
 
 
-def update_readme(readme: Path, table: str, image: Path, start=README_START, end=README_END, title="Table 2"):
-    """Put the table (without its title) and the plot between the README's markers; keep the rest."""
+def update_readme(readme: Path, table: str, image: Path, start=README_START, end=README_END, title="Table 2", more_images=()):
+    """Put the table (without its title) and the plot between the README's markers, then more_images ((title, path)
+    pairs) under it; keep the rest."""
     before, after = readme_parts(readme, start, end)
     body = table.split("\n", 2)[2].strip()  # below the "# ..." title and its blank line
-    write_text(readme, f"{before}\n{body}\n\n![{title}]({os.path.relpath(image, readme.parent)})\n{after}")
+    links = "\n\n".join(f"![{name}]({os.path.relpath(path, readme.parent)})" for name, path in [(title, image), *more_images])
+    write_text(readme, f"{before}\n{body}\n\n{links}\n{after}")
 
 
 def main(argv=None) -> int:
@@ -215,10 +312,12 @@ def main(argv=None) -> int:
     table = markdown(records, args.results_dir, args.out, args.allow_nonpaper, args.readme)
     write_text(args.out / "table2.md", table)
     plot(records, args.out / "table2.png")
+    curves_image = [("Learning curves", args.out / "curves.png")] if plot_curves(records, args.out / "curves.png") else []
     if args.readme:
-        update_readme(args.readme, table, args.out / "table2.png")
+        update_readme(args.readme, table, args.out / "table2.png", more_images=curves_image)
     print(table)
     print(f"wrote {args.out / 'mujoco.csv'} ({len(rows)} rows), {args.out / 'table2.md'}, {args.out / 'table2.png'}"
+          + "".join(f", {image}" for _, image in curves_image)
           + (f", and the table into {args.readme}" if args.readme else "")
           + (f"; left out {len(problems)} (listed above)" if problems else ""))
     return 0

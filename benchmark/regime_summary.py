@@ -4,6 +4,7 @@
 
 Reads <results-dir>/<regime>/runs/<method>/<env>/result_seeds<S>.json for every regime folder there and writes
 - <results-dir>/<regime>/mujoco.csv: env,method,seed,score (score = mean return of the seed's last three evaluations);
+- <results-dir>/<regime>/curves.png: evaluation return against epoch per env and method (aggregate.plot_curves);
 - <results-dir>/summary.md: per regime, env and method the mean over seeds, its 95% bootstrap interval, the seeds
   and the expert-normalised mean; the probability that C2F beats BC-OH and BC-OH beats BC-SO, with intervals;
 - <results-dir>/summary.png: the means with their intervals and the seeds, one panel per env.
@@ -168,6 +169,7 @@ def main(argv=None) -> int:
     for regime, (records, _) in tables.items():
         rows = "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in records)
         write_text(args.results_dir / regime / "mujoco.csv", "env,method,seed,score\n" + rows)
+        aggregate.plot_curves(records, args.results_dir / regime / "curves.png", experts, title=f"Learning curves, {regime}")
     command = " ".join(["python -m benchmark.regime_summary", *(argv if argv is not None else sys.argv[1:])])
     summary, image = markdown(tables, empty, experts, command), args.results_dir / "summary.png"
     write_text(args.results_dir / "summary.md", summary)
@@ -175,7 +177,7 @@ def main(argv=None) -> int:
     if args.readme:
         aggregate.update_readme(args.readme, summary, image, README_START, README_END, "Regime map")
     print(summary)
-    print(f"wrote {', '.join(f'{args.results_dir / r}/mujoco.csv' for r in tables)}, {args.results_dir / 'summary.md'}, {image}"
+    print(f"wrote {', '.join(f'{args.results_dir / r}/mujoco.csv, {args.results_dir / r}/curves.png' for r in tables)}, {args.results_dir / 'summary.md'}, {image}"
           + (f", and the summary into {args.readme}" if args.readme else "") + (f"; left out {len(problems)} (listed above)" if problems else ""))
     return 0
 

@@ -309,7 +309,7 @@ def test_aggregator_puts_the_table_into_the_readme_between_its_markers(tmp_path,
     assert text.startswith("# Title\n\n<!-- table2 -->\nMade by `python -m benchmark.aggregate --results-dir ")
     assert f"--readme {readme}` from 1 per-seed results" in text and "the old table" not in text
     assert "| Coarse-to-fine (`c2f`) | 5000 ± 0 (n=1) | 4798 ± 304 |" in text
-    assert text.endswith("\n\n![Table 2](results/table2.png)\n<!-- /table2 -->\n\nReading.\n")
+    assert text.endswith("\n\n![Table 2](results/table2.png)\n\n![Learning curves](results/curves.png)\n<!-- /table2 -->\n\nReading.\n")
     assert (out / "table2.md").read_text().split("\n", 2)[2].strip() in text
 
     readme.write_text("# Title without markers\n")
