@@ -195,3 +195,12 @@ def test_late_fusion_default_is_unchanged():
     """The default (late) policy MLP keeps its hidden feature: head sees hidden + action dims."""
     policy = c2f_policy()
     assert policy.head.in_features == 32 + 3 and isinstance(policy.policy_rest[-1], torch.nn.ReLU)
+
+
+def test_hidden_velocities_touch_only_the_policys_view(tmp_path, monkeypatch):
+    """The demo file and the expert keep the velocities: --hide-velocities hides them from the policy only."""
+    monkeypatch.chdir(tmp_path)
+    demos = bc_oh.load_or_generate_demos(cache_args(hide_velocities=True), bc_oh.make_env("Hopper-v4"))
+    assert (demos["observations"][:, HOPPER_VELOCITIES] != 0).mean() > 0.9
+    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
+        assert np.array_equal(saved["observations"], demos["observations"])
