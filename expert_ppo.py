@@ -212,16 +212,23 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 # Checkpoints
 
 
-def save_atomically(obj, path: str):
-    """torch.save to a temporary file, then rename: an interrupted run never leaves half a file."""
+# Copied from bc_oh.write_atomically
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
-        torch.save(obj, tmp)
+        with open(tmp, "wb") as file:
+            write(file)
         os.replace(tmp, path)
-    finally:  # after an interruption, remove the half-written temporary file (the old checkpoint is intact)
+    finally:  # after an interruption, remove the half-written temporary file
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+def save_atomically(obj, path: str):
+    """torch.save through write_atomically: an interrupted run never leaves half a checkpoint."""
+    write_atomically(path, lambda file: torch.save(obj, file))
 
 
 def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return=None):
