@@ -86,6 +86,8 @@ class Args:
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: Optional[str] = None
     """with --eval-only: also write the checkpoint, with its evaluated return recorded, to this path"""
+    retarget: bool = False
+    """with --eval-only: --checkpoint may be an expert for another version of --env (e.g. Hopper-v4 for Hopper-v5) with the same observation and action shapes; --ship-to then ships it for --env, recording where it came from"""
 
 
 class UsageError(Exception):
@@ -278,6 +280,20 @@ def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_
     return returns
 
 
+def retargeted_expert(path: str, env_id: str):
+    """--retarget: (the expert at path, the env it was made for), refused unless that env is another version of
+    env_id's (Hopper-v4 for Hopper-v5) with the same observation and action shapes."""
+    try:
+        made_for = torch.load(path, map_location="cpu", weights_only=True)["env_id"]
+    except Exception:
+        made_for = env_id  # load_expert says what is wrong with the file
+    policy, env = load_expert(path, made_for), make_env(env_id)
+    shapes = (policy.net[0].in_features, policy.net[-1].out_features) == (env.observation_space.shape[0], env.action_space.shape[0])
+    if made_for.split("-")[0] != env_id.split("-")[0] or not shapes:
+        raise UsageError(f"{path} is an expert for {made_for}, another env or other observation and action shapes than {env_id}'s: train one for {env_id}")
+    return policy, made_for
+
+
 def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
     native = env_frame_skip(args.env)
@@ -285,7 +301,8 @@ def eval_only(args: Args):
         env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.eval_episodes <= 0:
         raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
-    policy = load_expert(path, args.env)  # load_expert checked that the file is a readable checkpoint
+    # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
+    policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     # A policy acts well at the rate it was trained at: evaluate there unless told otherwise. Checkpoints
     # written before frame skips were recorded were all trained at the env's own.
@@ -300,6 +317,8 @@ def eval_only(args: Args):
         print(f"episode {i}: return {episode_return:.1f}")
     if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
         checkpoint.update(eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns))
+        if made_for != args.env:  # shipped for --env: load_expert accepts it there, and it says where it came from
+            checkpoint.update(env_id=args.env, retargeted_from=made_for)
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")

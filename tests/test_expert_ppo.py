@@ -257,3 +257,27 @@ def test_resume_at_another_frame_skip_is_refused(tiny_run, tmp_path):
     assert_usage_error(result, "was trained at frame skip 4, not 1")
     assert result.returncode == 2
     assert (run_dir / "latest.pt").read_bytes() == before
+
+
+def test_retarget_ships_an_expert_for_another_version_of_its_env(tmp_path):
+    """--retarget: a Hopper-v4 expert evaluated on Hopper-v5 (same shapes) and shipped for it, saying where it
+    came from; another family or other shapes are refused in one line."""
+    shipped = tmp_path / "Hopper-v5.pt"
+    result = run_script("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--retarget", "--eval-episodes", 1,
+                        "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt", "--ship-to", shipped)
+    assert result.returncode == 0, result.stderr
+    checkpoint = torch.load(shipped, weights_only=True)
+    assert (checkpoint["env_id"], checkpoint["retargeted_from"], checkpoint["eval_episodes"]) == ("Hopper-v5", "Hopper-v4", 1)
+    assert checkpoint["eval_return"] > 3000
+    expert_ppo.load_expert(str(shipped), "Hopper-v5")  # accepted for v5 now
+    for env, checkpoint_env in (("Ant-v5", "Ant-v4"), ("Walker2d-v5", "Hopper-v4")):
+        refused = run_script("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
+        assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other observation and action shapes than {env}'s")
+    without = run_script("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
+    assert_usage_error(without, "is an expert for Hopper-v4, not Hopper-v5")
+
+
+def test_shipped_v5_experts_are_accepted_for_their_env():
+    for family in ("Hopper", "Walker2d", "HalfCheetah"):
+        policy = expert_ppo.load_expert(str(REPO_ROOT / "experts" / f"{family}-v5.pt"), f"{family}-v5")
+        assert policy.net[0].in_features == gym.make(f"{family}-v5").observation_space.shape[0]
