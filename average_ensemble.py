@@ -235,6 +235,8 @@ def run(args):
     check_common_args(args)
     env = make_env(args.env)
     velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
+    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
+    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
     device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
@@ -255,7 +257,8 @@ def run(args):
                           "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    summary = {"env": args.env, "method": METHOD, "args": asdict(args), "scores": per_seed,
+    recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed,
                "mean": float(np.mean(scores)), "std": float(np.std(scores)),
                "members": {name: {"mean": float(np.mean(values)), "std": float(np.std(values))} for name, values in member_scores.items()}}
     write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))

@@ -282,6 +282,8 @@ def run(args):
     check_common_args(args)
     env = make_env(args.env)
     velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
+    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
+    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     check_dagger_args(args)
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
@@ -301,7 +303,8 @@ def run(args):
                           "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    summary = {"env": args.env, "method": METHOD, "args": asdict(args), "scores": per_seed,
+    recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed,
                "mean": float(np.mean(scores)), "std": float(np.std(scores))}
     write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
     print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}")

@@ -79,6 +79,7 @@ def test_tiny_run_reports_the_ensemble_and_both_members(tmp_path):
     ensemble_score, so_score, oh_score = map(float, row.split("|")[1:])
     data = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert data["method"] == "average_ensemble"
+    assert (data["args"]["frame_skip"], data["args"]["output_dir"]) == (4, "out"), "the resolved rate, a relative folder"
     seed = data["scores"]["1"]
     assert round(seed["score"], 1) == ensemble_score == float(summary.group(1))
     assert np.isclose(seed["score"], np.mean([ret for _, ret in seed["evaluations"][-3:]]))

@@ -116,6 +116,7 @@ def test_tiny_run_prints_the_summary_and_writes_the_json(tmp_path):
     data = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     seed = data["scores"]["1"]
     assert data["method"] == "dagger" and data["args"]["dagger_samples"] == 60
+    assert (data["args"]["frame_skip"], data["args"]["output_dir"]) == (4, "out"), "the resolved rate, a relative folder"
     assert [(r["labels"], r["aggregate"], r["beta"]) for r in seed["rounds"]] == [(30, 330, 0.5), (30, 360, 0.0)]
     assert [epoch for epoch, _ in seed["evaluations"]] == [1, 2, 3, 4, 4, 4]
     assert seed["score"] == pytest.approx(np.mean([ret for _, ret in seed["evaluations"][-3:]]))
