@@ -1,15 +1,21 @@
 """How much a reader has to read: each method file's length and how far it is from bc_oh.py.
 
-    python scripts/file_sizes.py          # a markdown table, as in the README's file list
+    python scripts/file_sizes.py                      # a markdown table
+    python scripts/file_sizes.py --readme README.md   # also put it between the README's sizes markers
 
 Lines = `wc -l`; diff = the lines `diff -I '^# Copied from' bc_oh.py FILE` marks with < or > (what
 `diff bc_oh.py FILE` shows a reader, copy markers aside); targets from the teaching-grade issue.
 """
 import re
 import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # tooling may import the repository's benchmark package
+from benchmark.aggregate import readme_parts  # noqa: E402
+from benchmark.results import write_text  # noqa: E402
+
 TARGETS = {"bc_oh": (330, None), "bc_so": (400, 20), "history_dropout": (400, 15), "c2f": (400, 80), "fca": (400, 100),
            "keyframe": (400, 100), "average_ensemble": (400, 100), "dagger": (400, 120)}
 """method file -> (most lines, most diff lines against bc_oh.py)"""
@@ -20,13 +26,22 @@ def diff_lines(name: str) -> int:
     return len(re.findall(r"^[<>]", diff.stdout, re.M))
 
 
-def main():
-    print("| file | lines (target) | diff vs bc_oh.py (target) |")
-    print("|---|---:|---:|")
+def table() -> str:
+    rows = ["| file | lines (target) | diff vs bc_oh.py (target) |", "|---|---:|---:|"]
     for name, (most_lines, most_diff) in TARGETS.items():
         lines = len((ROOT / f"{name}.py").read_text().splitlines())
         diff = "—" if most_diff is None else f"{diff_lines(name)} ({most_diff})"
-        print(f"| `{name}.py` | {lines} ({most_lines}) | {diff} |")
+        rows.append(f"| `{name}.py` | {lines} ({most_lines}) | {diff} |")
+    return "\n".join(rows) + "\n"
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    text = table()
+    print(text, end="")
+    if argv[:1] == ["--readme"] and len(argv) == 2:
+        before, after = readme_parts(Path(argv[1]), "<!-- sizes -->", "<!-- /sizes -->")
+        write_text(argv[1], f"{before}\n{text}{after}")
 
 
 if __name__ == "__main__":
