@@ -1,0 +1,184 @@
+"""scripts/minari_demos.py: Minari datasets <-> demo .npz files, exactly, and its refusals (skipped without minari)."""
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+minari = pytest.importorskip("minari")
+import gymnasium as gym  # noqa: E402
+
+from conftest import assert_usage_error, run_script, tiny_args  # noqa: E402
+
+KEYS = ("observations", "actions", "episode_starts", "rewards", "terminations", "truncations", "final_observations")
+
+
+@pytest.fixture(autouse=True)
+def minari_store(tmp_path, monkeypatch):
+    """A private local Minari store: the script's subprocesses inherit MINARI_DATASETS_PATH."""
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    return tmp_path / "minari"
+
+
+def rollout(episodes=4, max_steps=30, seed=0):
+    """Seeded random-action Hopper-v4 episodes, cut (truncated) at max_steps: per episode T+1 observations."""
+    env = gym.make("Hopper-v4")
+    env.action_space.seed(seed)
+    obs, _ = env.reset(seed=seed)
+    result = []
+    for _ in range(episodes):
+        episode = {"observations": [obs], "actions": [], "rewards": [], "terminations": [], "truncations": []}
+        while True:
+            action = env.action_space.sample()
+            obs, reward, terminated, truncated, _ = env.step(action)
+            truncated = truncated or len(episode["actions"]) == max_steps - 1
+            for key, value in zip(("observations", "actions", "rewards", "terminations", "truncations"), (obs, action, reward, terminated, truncated)):
+                episode[key].append(value)
+            if terminated or truncated:
+                break
+        result.append({key: np.array(value) for key, value in episode.items()})
+        obs, _ = env.reset()
+    env.close()
+    assert any(e["terminations"][-1] for e in result) and any(e["truncations"][-1] for e in result)
+    return result
+
+
+def make_dataset(dataset_id, episodes, env="Hopper-v4", **spaces):
+    buffers = [minari.data_collector.EpisodeBuffer(id=i, **episode) for i, episode in enumerate(episodes)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return minari.create_dataset_from_buffers(dataset_id, buffers, env=env, data_format="hdf5", **spaces)
+
+
+def as_demos(episodes):
+    """The episodes in the .npz layout (what generate_demos returns)."""
+    return {"observations": np.concatenate([e["observations"][:-1] for e in episodes]).astype(np.float64),
+            "actions": np.concatenate([e["actions"] for e in episodes]).astype(np.float32),
+            "episode_starts": np.concatenate([np.arange(len(e["actions"])) == 0 for e in episodes]),
+            "rewards": np.concatenate([e["rewards"] for e in episodes]).astype(np.float64),
+            "terminations": np.concatenate([e["terminations"] for e in episodes]).astype(bool),
+            "truncations": np.concatenate([e["truncations"] for e in episodes]).astype(bool),
+            "final_observations": np.array([e["observations"][-1] for e in episodes], np.float64)}
+
+
+def load_npz(path):
+    with np.load(path, allow_pickle=False) as data:
+        return {key: data[key] for key in data.files}
+
+
+def assert_same_demos(got, expected):
+    for key in KEYS:
+        assert got[key].dtype == expected[key].dtype, key
+        np.testing.assert_array_equal(got[key], expected[key], err_msg=key)
+
+
+def assert_same_dataset(dataset, episodes):
+    assert dataset.total_episodes == len(episodes)
+    for got, expected in zip(dataset.iterate_episodes(), episodes):
+        for key in ("observations", "actions", "rewards", "terminations", "truncations"):
+            np.testing.assert_array_equal(getattr(got, key), expected[key], err_msg=key)
+
+
+def test_dataset_to_npz_to_dataset(tmp_path, minari_store):
+    episodes = rollout()
+    make_dataset("test/hopper/random-v0", episodes)
+    result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "demos.npz")
+    assert result.returncode == 0, result.stderr
+    demos = load_npz(tmp_path / "demos.npz")
+    assert_same_demos(demos, as_demos(episodes))
+    meta = json.loads(str(demos["meta"]))
+    assert meta["env_id"] == "Hopper-v4" and meta["source"] == "minari:test/hopper/random-v0"
+    assert meta["num_samples"] == sum(len(e["actions"]) for e in episodes) and meta["frame_skip"] == 4
+
+    result = run_script("scripts/minari_demos.py", "export", tmp_path / "demos.npz", "test/hopper/again-v0")
+    assert result.returncode == 0, result.stderr
+    assert_same_dataset(minari.load_dataset("test/hopper/again-v0"), episodes)
+    # a dataset folder works as well as an id
+    result = run_script("scripts/minari_demos.py", "import", minari_store / "test/hopper/again-v0", tmp_path / "again.npz")
+    assert result.returncode == 0, result.stderr
+    assert_same_demos(load_npz(tmp_path / "again.npz"), as_demos(episodes))
+
+
+def test_npz_to_dataset_to_npz(tmp_path):
+    episodes = rollout(seed=1)
+    demos = as_demos(episodes)
+    meta = {"env_id": "Hopper-v4", "source": "test", "num_samples": len(demos["actions"]), "seed": 1, "frame_skip": 4}
+    np.savez(tmp_path / "demos.npz", meta=np.array(json.dumps(meta)), **demos)
+    result = run_script("scripts/minari_demos.py", "export", tmp_path / "demos.npz", "copycat/hopper/test-v0")
+    assert result.returncode == 0, result.stderr
+    dataset = minari.load_dataset("copycat/hopper/test-v0")
+    assert dataset.env_spec.id == "Hopper-v4"
+    assert_same_dataset(dataset, episodes)
+    result = run_script("scripts/minari_demos.py", "import", "copycat/hopper/test-v0", tmp_path / "back.npz")
+    assert result.returncode == 0, result.stderr
+    assert_same_demos(load_npz(tmp_path / "back.npz"), demos)
+
+
+def test_num_samples_cuts_the_last_episode(tmp_path):
+    episodes = rollout()
+    make_dataset("test/hopper/random-v0", episodes)
+    n = len(episodes[0]["actions"]) + 5  # five steps into the second episode
+    result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "cut.npz", "--num-samples", n)
+    assert result.returncode == 0, result.stderr
+    demos, full = load_npz(tmp_path / "cut.npz"), as_demos(episodes)
+    for key in ("observations", "actions", "episode_starts", "rewards", "terminations"):
+        np.testing.assert_array_equal(demos[key], full[key][:n], err_msg=key)
+    np.testing.assert_array_equal(demos["truncations"], np.r_[full["truncations"][:n - 1], True])
+    np.testing.assert_array_equal(demos["final_observations"], [full["final_observations"][0], episodes[1]["observations"][5]])
+    assert json.loads(str(demos["meta"]))["num_samples"] == n
+    result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "cut.npz", "--num-samples", 10**6)
+    refused(result, "--num-samples")
+
+
+def test_imported_demos_load_in_bc_oh(tmp_path):
+    import bc_oh
+
+    episodes = rollout()
+    make_dataset("test/hopper/random-v0", episodes)
+    assert run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "demos.npz").returncode == 0
+    demos = bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos=str(tmp_path / "demos.npz")), bc_oh.make_env("Hopper-v4"))
+    np.testing.assert_array_equal(demos["observations"], as_demos(episodes)["observations"])
+    np.testing.assert_array_equal(demos["episode_starts"], as_demos(episodes)["episode_starts"])
+
+
+def refused(result, expected):
+    """Exit status 2 and one stderr line holding `expected`, no traceback."""
+    assert_usage_error(result, expected)
+    assert result.returncode == 2, result.stderr
+
+
+def random_episodes(obs_space, act_dim, steps=20, episodes=2):
+    rng = np.random.default_rng(0)
+    return [{"observations": rng.normal(size=(steps + 1, *obs_space.shape)), "actions": rng.uniform(-1, 1, (steps, act_dim)).astype(np.float32),
+             "rewards": rng.normal(size=steps), "terminations": np.zeros(steps, bool), "truncations": np.arange(steps) == steps - 1}
+            for _ in range(episodes)]
+
+
+def test_refusals(tmp_path):
+    make_dataset("test/pendulum-v0", random_episodes(gym.spaces.Box(-np.inf, np.inf, (4,)), 1), env="InvertedPendulum-v4")
+    refused(run_script("scripts/minari_demos.py", "import", "test/pendulum-v0", tmp_path / "x.npz"), "not a MuJoCo env the method files know")
+    wide = gym.spaces.Box(-np.inf, np.inf, (12,), np.float64)
+    make_dataset("test/wide-v0", random_episodes(wide, 3), observation_space=wide)
+    refused(run_script("scripts/minari_demos.py", "import", "test/wide-v0", tmp_path / "x.npz"), "width 12")
+    space = gym.spaces.Dict({"state": gym.spaces.Box(-np.inf, np.inf, (11,), np.float64)})
+    episodes = [{**e, "observations": {"state": e["observations"]}} for e in random_episodes(space["state"], 3)]
+    make_dataset("test/dict-v0", episodes, observation_space=space)
+    refused(run_script("scripts/minari_demos.py", "import", "test/dict-v0", tmp_path / "x.npz"), "Dict")
+    refused(run_script("scripts/minari_demos.py", "import", "test/missing-v0", tmp_path / "x.npz"), "minari download")
+    assert not (tmp_path / "x.npz").exists()
+
+    demos = as_demos(random_episodes(gym.spaces.Box(-1, 1, (11,)), 3))
+    old = {key: demos[key] for key in ("observations", "actions", "episode_starts")}  # made before rewards were kept
+    np.savez(tmp_path / "old.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 4})), **old)
+    result = run_script("scripts/minari_demos.py", "export", tmp_path / "old.npz", "test/old-v0")
+    refused(result, "delete the cached demos/<env>_<N>.npz file and rerun any method script")
+    np.savez(tmp_path / "fs1.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 1})), **demos)
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "fs1.npz", "test/fs1-v0"), "frame skip 1")
+    np.savez(tmp_path / "new.npz", **demos)
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0"), "pass --env")
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0", "--env", "Walker2d-v4"), "width 11")
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "no version"), "not a Minari dataset id")
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/pendulum-v0", "--env", "Hopper-v4"), "already exists")
+    refused(run_script("scripts/minari_demos.py", "frobnicate"), "invalid choice")
+    result = run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0", "--env", "Hopper-v4")
+    assert result.returncode == 0, result.stderr  # the same file with its env named is fine
