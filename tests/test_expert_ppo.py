@@ -155,9 +155,8 @@ def interrupted_save(tmp_path, monkeypatch):
     path = tmp_path / "latest.pt"
     expert_ppo.save_atomically({"global_step": 1}, str(path))
 
-    def half_save(obj, file):
-        with open(file, "wb") as f:
-            f.write(b"half a checkpoint")
+    def half_save(obj, file):  # save_atomically hands torch.save the open temporary file
+        file.write(b"half a checkpoint")
         raise KeyboardInterrupt
 
     monkeypatch.setattr(expert_ppo.torch, "save", half_save)
