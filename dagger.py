@@ -275,6 +275,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 # ==============================================================================================
 # Shared plumbing, identical in every method file (each "# Copied from" block is checked by
 # scripts/check_copies.py): the seed loop, the partially observed env, demos, history, fast GPU path
+# (run() is this file's own: it also reports round 0 and the rounds)
 
 
 def run(args):
