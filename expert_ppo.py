@@ -192,6 +192,7 @@ class ExpertPolicy(nn.Module):
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        obs = obs[..., : len(self.obs_mean)]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -282,13 +283,16 @@ def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_
 
 def retargeted_expert(path: str, env_id: str):
     """--retarget: (the expert at path, the env it was made for), refused unless that env is another version of
-    env_id's (Hopper-v4 for Hopper-v5) with the same observation and action shapes."""
+    env_id's (Hopper-v4 for Hopper-v5) with the same action shape and the same observation, or one that is the
+    leading positions and velocities of env_id's (Ant-v4's 27 entries of Ant-v5's 105, before its contact forces)."""
     try:
         made_for = torch.load(path, map_location="cpu", weights_only=True)["env_id"]
     except Exception:
         made_for = env_id  # load_expert says what is wrong with the file
     policy, env = load_expert(path, made_for), make_env(env_id)
-    shapes = (policy.net[0].in_features, policy.net[-1].out_features) == (env.observation_space.shape[0], env.action_space.shape[0])
+    structure = getattr(env.unwrapped, "observation_structure", {})
+    observations = (env.observation_space.shape[0], structure.get("qpos", 0) + structure.get("qvel", 0))
+    shapes = policy.net[0].in_features in observations and policy.net[-1].out_features == env.action_space.shape[0]
     if made_for.split("-")[0] != env_id.split("-")[0] or not shapes:
         raise UsageError(f"{path} is an expert for {made_for}, another env or other observation and action shapes than {env_id}'s: train one for {env_id}")
     return policy, made_for

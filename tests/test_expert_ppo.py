@@ -269,14 +269,23 @@ def test_retarget_ships_an_expert_for_another_version_of_its_env(tmp_path):
     assert (checkpoint["env_id"], checkpoint["retargeted_from"], checkpoint["eval_episodes"]) == ("Hopper-v5", "Hopper-v4", 1)
     assert checkpoint["eval_return"] > 3000
     expert_ppo.load_expert(str(shipped), "Hopper-v5")  # accepted for v5 now
-    for env, checkpoint_env in (("Ant-v5", "Ant-v4"), ("Walker2d-v5", "Hopper-v4")):
+    for env, checkpoint_env in (("Walker2d-v5", "Hopper-v4"), ("HalfCheetah-v5", "Ant-v4")):
         refused = run_script("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
         assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other observation and action shapes than {env}'s")
     without = run_script("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
     assert_usage_error(without, "is an expert for Hopper-v4, not Hopper-v5")
 
 
-def test_shipped_v5_experts_are_accepted_for_their_env():
-    for family in ("Hopper", "Walker2d", "HalfCheetah"):
+def test_shipped_v5_experts_act_on_their_envs_observations():
+    """Each v5 expert is accepted for its env and acts on that env's observation; Ant-v4's expert reads the 27
+    leading entries of Ant-v5's 105 (positions and velocities; the contact forces come after)."""
+    for family in ("Hopper", "Walker2d", "HalfCheetah", "Ant"):
+        env = gym.make(f"{family}-v5")
         policy = expert_ppo.load_expert(str(REPO_ROOT / "experts" / f"{family}-v5.pt"), f"{family}-v5")
-        assert policy.net[0].in_features == gym.make(f"{family}-v5").observation_space.shape[0]
+        obs = torch.as_tensor(env.reset(seed=0)[0], dtype=torch.float32)[None]
+        assert policy(obs).shape == (1, env.action_space.shape[0])
+        assert policy.net[0].in_features == (27 if family == "Ant" else obs.shape[1])
+    obs = torch.randn(4, 105)
+    changed = obs.clone()
+    changed[:, 27:] += 5.0  # the contact forces do not move Ant's expert
+    assert torch.equal(policy(obs), policy(changed)) and not torch.equal(policy(obs), policy(obs * 2))

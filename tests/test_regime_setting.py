@@ -204,3 +204,17 @@ def test_hidden_velocities_touch_only_the_policys_view(tmp_path, monkeypatch):
     assert (demos["observations"][:, HOPPER_VELOCITIES] != 0).mean() > 0.9
     with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
         assert np.array_equal(saved["observations"], demos["observations"])
+
+
+@pytest.mark.parametrize("env", ["Hopper-v5", "Ant-v5"])
+def test_a_method_file_runs_on_v5_envs_with_the_shipped_experts(tmp_path, env):
+    """v5: demos from the shipped (re-targeted) expert, noise on the velocities that observation_structure names
+    (Ant-v5: 13-26 of 105), a tiny training run that ends with the summary line."""
+    link_experts(tmp_path)
+    result = run_script("c2f.py", "--env", env, "--seeds", 1, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
+                        "--num-demo-samples", 200, "--output-dir", tmp_path / "out", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1].startswith(f"{env} c2f: ")
+    with np.load(tmp_path / "demos" / f"{env}_200.npz") as demos:
+        assert demos["observations"].shape[1] == gym.make(env).observation_space.shape[0]
+    assert bc_oh.velocity_dims(gym.make(env), env) == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
