@@ -453,8 +453,9 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
         raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
-    if demo_meta(path).get("frame_skip", native) != frame_skip:
-        raise UsageError(f"{path} was recorded at frame skip {demo_meta(path)['frame_skip']}, this run is at {frame_skip}: pass --frame-skip {demo_meta(path)['frame_skip']} or demos of this rate")
+    recorded_rate = demo_meta(path).get("frame_skip", native)  # a file without the record was made at the native rate
+    if recorded_rate != frame_skip:
+        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
     meaning = {"observations": "o_t per step, (N, obs_dim)", "actions": "the expert's a_t, (N, act_dim)", "episode_starts": "True where an episode starts, (N,)"}
     try:
         with np.load(path, allow_pickle=False) as data:

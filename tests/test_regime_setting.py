@@ -218,3 +218,13 @@ def test_a_method_file_runs_on_v5_envs_with_the_shipped_experts(tmp_path, env):
     with np.load(tmp_path / "demos" / f"{env}_200.npz") as demos:
         assert demos["observations"].shape[1] == gym.make(env).observation_space.shape[0]
     assert bc_oh.velocity_dims(gym.make(env), env) == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
+
+
+def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(tmp_path):
+    """A user's demo file with no meta (no frame_skip record) is native: at --frame-skip 1 it is refused in one line."""
+    rng = np.random.default_rng(0)
+    path = tmp_path / "user.npz"
+    np.savez(path, observations=rng.normal(size=(200, 11)), actions=rng.uniform(-1, 1, (200, 3)).astype(np.float32),
+             episode_starts=np.arange(200) % 50 == 0)
+    assert_usage_error(run_script("bc_oh.py", "--demos", path, "--frame-skip", 1, "--epochs", 1, cwd=tmp_path),
+                       "was recorded at frame skip 4, this run is at 1: pass --frame-skip 4")
