@@ -10,6 +10,8 @@ and meta (dataset id, env id, num_samples). export: a demo file -> a local datas
 `minari.load_dataset(ID)` opens. Only the MuJoCo envs the method files know, at the env's own widths.
 Needs `pip install -r requirements-minari.txt`; the method files do not import minari.
 """
+import contextlib
+import io
 import json
 import os
 import re
@@ -17,12 +19,13 @@ import shutil
 import sys
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # tooling may import the repository's benchmark package
-from benchmark.results import OneLineParser, UsageError, run_cli  # noqa: E402
+from benchmark.results import OneLineParser, UsageError, run_cli, written_atomically  # noqa: E402
 
 warnings.filterwarnings("ignore", ".*is out of date", DeprecationWarning)  # the paper's v4 envs, used on purpose
 KNOWN_ENVS = re.compile(r"(Hopper|HalfCheetah|Walker2d|Ant)-v[45]")
@@ -96,11 +99,9 @@ def import_dataset(source: str, out: str, num_samples=None):
             raise UsageError(f"dataset {source}: {key} has a non-finite value at row {bad[0][0]}: the method files refuse it, use a clean dataset")
     meta = {"env_id": env_id, "source": f"minari:{dataset.id}", "minari_dataset_id": dataset.id, "num_samples": len(demos["actions"]),
             "frame_skip": (dataset.env_spec.kwargs or {}).get("frame_skip", getattr(env.unwrapped, "frame_skip", None))}
-    os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
-    tmp = f"{out}.tmp{os.getpid()}"  # written, then renamed: an interrupted run leaves no half file
-    with open(tmp, "wb") as file:
-        np.savez(file, meta=np.array(json.dumps(meta)), **demos)
-    os.replace(tmp, out)
+    with written_atomically(out) as tmp:  # written, then renamed: an interrupted run leaves no half file
+        np.savez(tmp, meta=np.array(json.dumps(meta)), **demos)
+        check_with_the_method_loader(tmp, env_id, meta["frame_skip"])
     print(f"{out}: {len(demos['actions'])} steps, {len(demos['final_observations'])} episodes of {env_id} from Minari dataset {dataset.id}")
 
 
@@ -163,6 +164,19 @@ def export_demos(path: str, dataset_id: str, env_id=None):
         shutil.rmtree(get_dataset_path(dataset_id), ignore_errors=True)
         raise
     print(f"Minari dataset {dataset_id} at {get_dataset_path(dataset_id)}: {n} steps, {len(buffers)} episodes of {env_id}")
+
+
+def check_with_the_method_loader(path, env_id: str, frame_skip):
+    """The import goes through the loader of every method file (bc_oh.load_or_generate_demos, here the tooling
+    may import the repository's code): what a method file would refuse is refused here, in one line."""
+    import bc_oh
+
+    args = SimpleNamespace(demos=str(path), env=env_id, num_demo_samples=None, expert="", batch_size=1, frame_skip=frame_skip)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # its "demos: ..." line: the import prints its own
+            bc_oh.load_or_generate_demos(args, bc_oh.make_env(env_id))
+    except bc_oh.UsageError as error:
+        raise UsageError(f"the method files would refuse this import ({error})")
 
 
 def main(argv=None):

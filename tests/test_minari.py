@@ -182,3 +182,22 @@ def test_refusals(tmp_path):
     refused(run_script("scripts/minari_demos.py", "frobnicate"), "invalid choice")
     result = run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0", "--env", "Hopper-v4")
     assert result.returncode == 0, result.stderr  # the same file with its env named is fine
+
+
+def test_the_import_goes_through_the_method_files_loader(tmp_path, monkeypatch, capsys):
+    """What bc_oh's loader refuses, the import refuses too (one line, exit 2) and writes no file."""
+    import bc_oh
+    import minari_demos
+
+    make_dataset("test/hopper/random-v0", rollout())
+    seen = []
+
+    def refusing_loader(args, env):
+        seen.append((args.demos, args.env, args.frame_skip))
+        raise bc_oh.UsageError("planted refusal")
+
+    monkeypatch.setattr(bc_oh, "load_or_generate_demos", refusing_loader)
+    with pytest.raises(SystemExit) as stop:
+        minari_demos.run_cli(lambda: minari_demos.main(["import", "test/hopper/random-v0", str(tmp_path / "x.npz")]))
+    assert stop.value.code == 2 and "the method files would refuse this import (planted refusal)" in capsys.readouterr().err
+    assert seen and seen[0][1:] == ("Hopper-v4", 4) and not list(tmp_path.glob("x.npz*")), "no output, no temporary file"
