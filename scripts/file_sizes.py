@@ -14,7 +14,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # tooling may import the repository's benchmark package
 from benchmark.aggregate import readme_parts  # noqa: E402
-from benchmark.results import write_text  # noqa: E402
+from benchmark.results import OneLineParser, run_cli, write_text  # noqa: E402
 
 TARGETS = {"bc_oh": (330, None), "bc_so": (400, 20), "history_dropout": (400, 15), "c2f": (400, 80), "fca": (400, 100),
            "keyframe": (400, 100), "average_ensemble": (400, 100), "dagger": (400, 120)}
@@ -36,13 +36,18 @@ def table() -> str:
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
+    parser = OneLineParser(prog="python scripts/file_sizes.py", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--readme", type=Path, help="also put the table between this file's <!-- sizes --> markers")
+    args = parser.parse_args(argv)
+    if args.readme:
+        readme_parts(args.readme, "<!-- sizes -->", "<!-- /sizes -->")  # check the markers before anything else
     text = table()
     print(text, end="")
-    if argv[:1] == ["--readme"] and len(argv) == 2:
-        before, after = readme_parts(Path(argv[1]), "<!-- sizes -->", "<!-- /sizes -->")
-        write_text(argv[1], f"{before}\n{text}{after}")
+    if args.readme:
+        before, after = readme_parts(args.readme, "<!-- sizes -->", "<!-- /sizes -->")
+        write_text(args.readme, f"{before}\n{text}{after}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

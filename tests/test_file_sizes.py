@@ -1,6 +1,6 @@
 """scripts/file_sizes.py: the README's table of file lengths and diffs against bc_oh.py."""
 import file_sizes
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, assert_usage_error, run_script
 
 
 def test_the_table_counts_lines_and_diff_lines(tmp_path):
@@ -12,3 +12,9 @@ def test_the_table_counts_lines_and_diff_lines(tmp_path):
     readme.write_text("intro\n<!-- sizes -->\nold\n<!-- /sizes -->\nrest\n")
     file_sizes.main(["--readme", str(readme)])
     assert readme.read_text() == "intro\n<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\nrest\n"
+
+
+def test_a_readme_without_markers_is_one_line(tmp_path):
+    (tmp_path / "README.md").write_text("no markers\n")
+    assert_usage_error(run_script("scripts/file_sizes.py", "--readme", tmp_path / "README.md"), "needs one <!-- sizes --> line")
+    assert_usage_error(run_script("scripts/file_sizes.py", "--readme", tmp_path / "missing.md"), "not found")
