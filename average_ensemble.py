@@ -154,13 +154,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
-    member_evaluations = {name: [] for name in policy.members}
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
 
-    def train_step():
+    def train_step(idx):  # behavioural cloning of both members: an Adam step on the sum of their MSEs
         losses = {name: ((member(inputs[idx]) - targets[idx]) ** 2).mean() for name, member in policy.members.items()}
         loss = sum(losses.values())  # disjoint parameters, per-parameter Adam: each member trains exactly as if alone
         optimizer.zero_grad()
@@ -168,13 +163,28 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         optimizer.step()
         return losses
 
-    train_step = CudaGraphStep(train_step, enabled=fast)
+    evaluations, member_evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast)
+    return {"evaluations": evaluations, "member_evaluations": member_evaluations, "policy": policy, "obs_dim": obs_dim,
+            "act_dim": act_dim, "ms_per_step": ms_per_step}
+
+
+# (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, the optimizer's learning rate decayed linearly to zero;
+    evaluate the ensemble and each member every --eval-every epochs and after the last. Returns the
+    evaluations [(epoch, mean return)], each member's ({name: [(epoch, mean return)]}) and the ms per step."""
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    member_evaluations = {name: [] for name in policy.members}
+    generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    step_fn = CudaGraphStep(lambda: train_step(idx), enabled=fast)
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
             set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-            losses = train_step()
+            idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            losses = step_fn()
             step += 1
         loss_text = ", ".join(f"{name} {value.item():.5f}" for name, value in losses.items())  # .item() waits for the GPU
         train_time += time.time() - epoch_start
@@ -191,8 +201,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             last += "".join(f", {name} {evals[-1][1]:.1f}" for name, evals in member_evaluations.items() if evals)
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {loss_text} | last eval {last} | "
                   f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "member_evaluations": member_evaluations, "policy": policy, "obs_dim": obs_dim,
-            "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
+    return evaluations, member_evaluations, 1000 * train_time / step
 
 
 # ==============================================================================================

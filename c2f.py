@@ -167,32 +167,6 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
                   args.coarse_input, args.policy_input, args.stop_gradient)
 
 
-def train_coarse(policy: Policy, args, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device, fast: bool):
-    """Stage 1 of --two-stage: the coarse model alone, on its loss, for --epochs (lr decayed to zero); then frozen."""
-    optimizer = make_adam(policy.coarse.parameters(), args.learning_rate, fast)
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, start = args.epochs * steps_per_epoch, time.time()
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
-
-    def train_step():
-        loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        return loss
-
-    train_step = CudaGraphStep(train_step, enabled=fast)
-    for step in range(1, total_steps + 1):
-        set_learning_rate(optimizer, args.learning_rate * (1 - (step - 1) / total_steps))  # linear decay
-        idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-        loss = train_step()
-        if step % (steps_per_epoch * max(1, args.epochs // 20)) == 0 or step == total_steps:
-            eta = (time.time() - start) / step * (total_steps - step) / 60
-            print(f"seed {seed} | stage 1 (coarse model) | epoch {step // steps_per_epoch}/{args.epochs} | coarse loss {loss.item():.5f} | ETA {eta:.1f} min", flush=True)
-    policy.coarse.requires_grad_(False)
-
-
 def train_seed(args, demos: dict, seed: int, device) -> dict:
     """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
     torch.manual_seed(seed)
@@ -203,17 +177,25 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     fast = device.type == "cuda" and args.cuda_graph
-    if args.two_stage:  # stage 1: the coarse model alone, then frozen; the epochs below are stage 2
-        train_coarse(policy, args, inputs, targets, seed, device, fast)
-    optimizer = make_adam([p for p in policy.parameters() if p.requires_grad], args.learning_rate, fast)
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    if args.two_stage:  # stage 1: the coarse model alone on the coarse loss, then frozen; the fit below is stage 2
+        coarse_optimizer = make_adam(policy.coarse.parameters(), args.learning_rate, fast)
 
-    def train_step():
+        def coarse_step(idx):
+            loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
+            coarse_optimizer.zero_grad()
+            loss.backward()
+            coarse_optimizer.step()
+            return loss
+
+        print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
+        fit(args, policy, coarse_optimizer, coarse_step, len(inputs), seed, device, fast, evaluate_policy=False)
+        policy.coarse.requires_grad_(False)
+        print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
+    optimizer = make_adam([p for p in policy.parameters() if p.requires_grad], args.learning_rate, fast)
+
+    def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (with --two-stage the final loss alone)
         zeta, action = policy.coarse_and_final(inputs[idx])
-        loss = ((action - targets[idx]) ** 2).mean()  # the final loss; Eq. 2 adds the coarse loss
+        loss = ((action - targets[idx]) ** 2).mean()
         if not args.two_stage:
             loss = loss + ((zeta - targets[idx]) ** 2).mean()
         optimizer.zero_grad()
@@ -221,17 +203,30 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         optimizer.step()
         return loss
 
-    train_step = CudaGraphStep(train_step, enabled=fast)
+    evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+
+
+# Copied from bc_oh.fit
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, the optimizer's learning rate decayed linearly to zero;
+    evaluate the policy every --eval-every epochs and after the last (unless evaluate_policy is False).
+    Returns the evaluations [(epoch, mean return)] and the training time per step in ms."""
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    step_fn = CudaGraphStep(lambda: train_step(idx), enabled=fast)
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
             set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-            loss = train_step()
+            idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            loss = step_fn()
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
         train_time += time.time() - epoch_start
-        if epoch % args.eval_every == 0 or epoch == args.epochs:
+        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
             policy.eval()
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
@@ -240,7 +235,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
                   f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
+    return evaluations, 1000 * train_time / step
 
 
 # ==============================================================================================

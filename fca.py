@@ -180,24 +180,33 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam([*policy.encoder.parameters(), *policy.head.parameters()], args.learning_rate, fast, betas=(0.5, 0.999))
     adversary_optimizer = make_adam(policy.adversary.parameters(), args.adversary_lr, fast, betas=(0.5, 0.999))
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
 
-    def train_step():  # alternating updates: the adversary D, then the encoder G and the policy head F
+    def train_step(idx):  # alternating updates: the adversary D, then the encoder G and the policy head F
         adversary_loss = adversary_step(policy, adversary_optimizer, inputs[idx], targets[idx], previous[idx])
         loss, _ = encoder_policy_step(policy, optimizer, inputs[idx], targets[idx], previous[idx], args.adversary_weight)
         return loss, adversary_loss
 
-    train_step = CudaGraphStep(train_step, enabled=fast)
+    evaluations, ms_per_step = fit(args, policy, optimizer, adversary_optimizer, train_step, len(inputs), seed, device, fast)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+
+
+# (fit is this file's own: it decays the adversary's learning rate too, and logs the adversary's mean error per epoch)
+def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, both optimizers' learning rates decayed linearly to zero;
+    evaluate the policy every --eval-every epochs and after the last.
+    Returns the evaluations [(epoch, mean return)] and the training time per step in ms."""
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    step_fn = CudaGraphStep(lambda: train_step(idx), enabled=fast)
     for epoch in range(1, args.epochs + 1):
         epoch_start, adversary_error = time.time(), torch.zeros((), device=device)
         for _ in range(steps_per_epoch):
             set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
             set_learning_rate(adversary_optimizer, args.adversary_lr * (1 - step / total_steps))
-            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-            loss, adversary_loss = train_step()
+            idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            loss, adversary_loss = step_fn()
             adversary_error += adversary_loss / steps_per_epoch
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
@@ -211,7 +220,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | adversary error {adversary_error.item():.5f} | "
                   f"last eval {last} | {1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
+    return evaluations, 1000 * train_time / step
 
 
 # ==============================================================================================

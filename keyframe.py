@@ -203,12 +203,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
-    steps_per_epoch = len(inputs) // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
-    generator = torch.Generator(device=device).manual_seed(seed)
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
 
-    def train_step():
+    def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions, weighted per sample
         error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)
         loss = ((weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)) * error).mean()
         optimizer.zero_grad()
@@ -216,17 +212,30 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         optimizer.step()
         return loss
 
-    train_step = CudaGraphStep(train_step, enabled=fast)
+    evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast)
+    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+
+
+# Copied from bc_oh.fit
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, the optimizer's learning rate decayed linearly to zero;
+    evaluate the policy every --eval-every epochs and after the last (unless evaluate_policy is False).
+    Returns the evaluations [(epoch, mean return)] and the training time per step in ms."""
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    generator = torch.Generator(device=device).manual_seed(seed)
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    step_fn = CudaGraphStep(lambda: train_step(idx), enabled=fast)
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
             set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-            idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-            loss = train_step()
+            idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            loss = step_fn()
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
         train_time += time.time() - epoch_start
-        if epoch % args.eval_every == 0 or epoch == args.epochs:
+        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
             policy.eval()
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
@@ -235,7 +244,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
                   f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": 1000 * train_time / step}
+    return evaluations, 1000 * train_time / step
 
 
 # ==============================================================================================

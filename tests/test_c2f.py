@@ -150,36 +150,46 @@ def train(module, monkeypatch, capsys, seed=1, demos=None, **overrides):
     return {k: v.clone() for k, v in result["policy"].state_dict().items()}, lines
 
 
+def record_stages(monkeypatch) -> list:
+    """Patch c2f.fit to record (evaluate_policy, weights before, weights after) of every call."""
+    calls, original = [], c2f.fit
+
+    def recording_fit(args, policy, *rest, **kwargs):
+        before = copy.deepcopy(policy.state_dict())
+        output = original(args, policy, *rest, **kwargs)
+        calls.append((kwargs.get("evaluate_policy", True), before, copy.deepcopy(policy.state_dict())))
+        return output
+
+    monkeypatch.setattr(c2f, "fit", recording_fit)
+    return calls
+
+
 def test_two_stage_trains_the_coarse_model_first_then_leaves_it_unchanged(monkeypatch, capsys):
-    snapshots = {}
-    stage_one = c2f.train_coarse
-
-    def recording_train_coarse(policy, *rest):
-        snapshots["initial"] = copy.deepcopy(policy.state_dict())
-        stage_one(policy, *rest)
-        snapshots["after stage 1"] = copy.deepcopy(policy.state_dict())
-
-    monkeypatch.setattr(c2f, "train_coarse", recording_train_coarse)
+    """Stage 1 and stage 2 are two runs of the one training loop, fit: the first trains only the coarse model."""
+    calls = record_stages(monkeypatch)
     final, lines = train(c2f, monkeypatch, capsys, two_stage=True, stop_gradient=False)  # no sg: only freezing protects it
-    initial, after_one = snapshots["initial"], snapshots["after stage 1"]
+    assert [evaluates for evaluates, _, _ in calls] == [False, True], "stage 1 does not evaluate, stage 2 does"
+    (_, initial, after_one), (_, _, after_two) = calls
     coarse = [name for name in final if name.startswith("coarse.")]
     rest = [name for name in final if not name.startswith(("coarse.", "normalize."))]
     assert all(not torch.equal(initial[name], after_one[name]) for name in coarse), "stage 1 trains the coarse model"
     assert all(torch.equal(initial[name], after_one[name]) for name in rest), "stage 1 trains nothing else"
     assert all(torch.equal(after_one[name], final[name]) for name in coarse), "stage 2 must not change the coarse model"
     assert all(not torch.equal(after_one[name], final[name]) for name in rest), "stage 2 trains the rest"
-    assert sum("stage 1" in line for line in lines) >= 1 and sum("stage 1" not in line for line in lines) == 2
+    assert all(torch.equal(after_two[name], final[name]) for name in final)
+    epochs = [line for line in lines if "| epoch " in line]
+    assert [("last eval n/a" in line) for line in epochs] == [True, True, False, False], "2 epochs of stage 1, then 2 evaluated ones"
 
 
 def test_two_stage_coarse_model_is_bc_so(monkeypatch, capsys):
     """Stage 1 trains exactly a BC-SO policy: same init, data, batches and lr schedule give the same weights."""
-    snapshot = {}
-    stage_one = c2f.train_coarse
-    monkeypatch.setattr(c2f, "train_coarse", lambda policy, *rest: (stage_one(policy, *rest), snapshot.update(copy.deepcopy(policy.coarse.state_dict()))))
+    calls = record_stages(monkeypatch)
     train(c2f, monkeypatch, capsys, two_stage=True)
     bc_so_weights, _ = train(bc_so, monkeypatch, capsys)
-    for name, value in snapshot.items():
-        assert torch.allclose(bc_so_weights[f"net.{name}"], value, atol=1e-6), name
+    after_stage_one = calls[0][2]
+    for name, value in after_stage_one.items():
+        if name.startswith("coarse."):
+            assert torch.allclose(bc_so_weights[f"net.{name.removeprefix('coarse.')}"], value, atol=1e-6), name
 
 
 def test_joint_training_minimises_both_losses(monkeypatch, capsys):

@@ -69,7 +69,7 @@ def test_bc_so_smoke_run_with_two_seeds(workdir):
 
 def test_c2f_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
     result = smoke("c2f.py", workdir, "--two-stage", "--fusion", "middle", "--coarse-output", "feature", "--save-model")
-    assert "stage 1 (coarse model) | epoch 2/2" in result.stdout
+    assert "seed 1 | stage 1: the coarse model alone" in result.stdout and "seed 1 | stage 2: the coarse model frozen" in result.stdout
     summary = check_result(result, workdir, "c2f", [1])
     assert (summary["args"]["fusion"], summary["args"]["coarse_output"], summary["args"]["two_stage"]) == ("middle", "feature", True)
     checkpoint = torch.load(workdir / "out" / "c2f" / "seed1.pt", weights_only=False)
