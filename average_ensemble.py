@@ -169,10 +169,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
 
 # (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
-def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
-    """Run train_step(minibatch indices) for --epochs, the optimizer's learning rate decayed linearly to zero;
-    evaluate the ensemble and each member every --eval-every epochs and after the last. Returns the
-    evaluations [(epoch, mean return)], each member's ({name: [(epoch, mean return)]}) and the ms per step."""
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, learning rate decayed linearly to zero; evaluate every --eval-every
+    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], each member's, ms per step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     member_evaluations = {name: [] for name in policy.members}
@@ -188,7 +187,7 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
             step += 1
         loss_text = ", ".join(f"{name} {value.item():.5f}" for name, value in losses.items())  # .item() waits for the GPU
         train_time += time.time() - epoch_start
-        if epoch % args.eval_every == 0 or epoch == args.epochs:
+        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
             policy.eval()
             eval_seed = 10_000 * seed + epoch  # the same episodes (starts and noise) for the ensemble and its members
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, eval_seed, device)))))

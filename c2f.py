@@ -209,9 +209,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
 # Copied from bc_oh.fit
 def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
-    """Run train_step(minibatch indices) for --epochs, the optimizer's learning rate decayed linearly to zero;
-    evaluate the policy every --eval-every epochs and after the last (unless evaluate_policy is False).
-    Returns the evaluations [(epoch, mean return)] and the training time per step in ms."""
+    """Run train_step(minibatch indices) for --epochs, learning rate decayed linearly to zero; evaluate every --eval-every
+    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], ms per training step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
