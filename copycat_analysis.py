@@ -327,9 +327,10 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
     return np.concatenate(frames, axis=1)
 
 
-# Copied from bc_oh.HistoryStacker
+# Copied from dagger.HistoryStacker
 class HistoryStacker:
-    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
+    """stack_history's rule online: per env of a vector env, the last H frames, oldest first; a new episode
+    starts with its first frame repeated."""
 
     def __init__(self, history: int):
         self.history, self.frames = history, None

@@ -239,15 +239,15 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     obs, _ = envs.reset(seed=seed)
-    stacker, running = HistoryStacker(args.history), np.ones(episodes, bool)
-    returns, new_episode = np.zeros(episodes), np.ones(episodes, bool)
+    frames = np.repeat(obs[:, None], args.history, axis=1)  # per env [o_{t-H+1}, ..., o_t], the first frame repeated (stack_history's rule)
+    returns, running = np.zeros(episodes), np.ones(episodes, bool)
     while running.any():
-        inputs = torch.as_tensor(stacker.push(obs, new_episode), dtype=torch.float32, device=device)
+        inputs = torch.as_tensor(frames.reshape(episodes, -1), dtype=torch.float32, device=device)
         action = policy(inputs).cpu().numpy().clip(low, high)
         obs, reward, terminated, truncated, _ = envs.step(action)
         returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays exactly one episode
-        new_episode = terminated | truncated
+        running &= ~(terminated | truncated)  # each env plays exactly one episode: what follows its end does not count
+        frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
     envs.close()
     return returns.tolist()
 
@@ -520,21 +520,6 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
     return np.concatenate(frames, axis=1)
-
-
-# Copied from bc_oh.HistoryStacker
-class HistoryStacker:
-    """The same history rule online: per env of a vector env, the last H frames, oldest first."""
-
-    def __init__(self, history: int):
-        self.history, self.frames = history, None
-
-    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
-        if self.frames is None:
-            self.frames = np.repeat(obs[:, None], self.history, axis=1)
-        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
-        self.frames[episode_start] = obs[episode_start][:, None]
-        return self.frames.reshape(len(obs), -1)
 
 
 # Copied from bc_oh.write_atomically

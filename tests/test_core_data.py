@@ -9,8 +9,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 
 import bc_oh
+import dagger
 from conftest import REPO_ROOT, tiny_args
 
 HOPPER_VELOCITIES = list(range(5, 11))
@@ -78,19 +80,38 @@ def test_stack_history_repeats_the_first_frame_of_each_episode():
     assert np.array_equal(bc_oh.stack_history(observations, starts, 1), observations)
 
 
-def test_history_stacker_agrees_with_stack_history():
-    """Two parallel envs with different episode boundaries, fed step by step as evaluate() does."""
+def test_dagger_history_stacker_agrees_with_stack_history():
+    """Two parallel envs with different episode boundaries, fed step by step (dagger's rollouts, copycat_analysis)."""
     rng = np.random.default_rng(0)
     steps, history = 9, 3
     observations = rng.normal(size=(2, steps, 4))
     starts = np.zeros((2, steps), bool)
     starts[:, 0] = True
     starts[0, 4], starts[1, 2], starts[1, 3] = True, True, True  # env 1 has a one-step episode
-    stacker = bc_oh.HistoryStacker(history)
+    stacker = dagger.HistoryStacker(history)
     online = np.array([stacker.push(observations[:, t], starts[:, t]) for t in range(steps)])  # (steps, 2, H*4)
     for env in range(2):
         assert np.array_equal(online[:, env], bc_oh.stack_history(observations[env], starts[env], history))
     assert np.array_equal(online[4, 0], np.tile(observations[0, 4], history)), "a new episode starts with its frame repeated"
+
+
+def test_evaluation_feeds_the_policy_the_history_of_stack_history():
+    """The inputs evaluate() gives the policy over one episode are stack_history of that episode's observations."""
+    seen = []
+
+    def policy(inputs):
+        seen.append(inputs.numpy()[0].copy())
+        return torch.as_tensor(np.random.default_rng(len(seen)).uniform(-1, 1, (len(inputs), 3)))
+
+    bc_oh.evaluate(policy, tiny_args(bc_oh, history=3), 1, 5, torch.device("cpu"))
+    inputs = np.array(seen)  # (steps, 3 * 11), the loop ends with the episode
+    assert len(inputs) > 3
+    starts = np.zeros(len(inputs), bool)
+    starts[0] = True
+    observations = inputs[:, -11:]  # the current frame o_t of each step
+    assert np.array_equal(inputs, bc_oh.stack_history(observations, starts, 3))
+    assert np.array_equal(inputs[0], np.tile(observations[0], 3)), "an episode starts with its first frame repeated"
+    assert len({row.tobytes() for row in observations}) == len(inputs), "a new frame every step"
 
 
 # ----------------------------------------------------------------------------------------------
