@@ -327,22 +327,6 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
     return np.concatenate(frames, axis=1)
 
 
-# Copied from dagger.HistoryStacker
-class HistoryStacker:
-    """stack_history's rule online: per env of a vector env, the last H frames, oldest first; a new episode
-    starts with its first frame repeated."""
-
-    def __init__(self, history: int):
-        self.history, self.frames = history, None
-
-    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
-        if self.frames is None:
-            self.frames = np.repeat(obs[:, None], self.history, axis=1)
-        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
-        self.frames[episode_start] = obs[episode_start][:, None]
-        return self.frames.reshape(len(obs), -1)
-
-
 # ----------------------------------------------------------------------------------------------
 # Networks: the three policies, rebuilt from their checkpoints
 
@@ -574,12 +558,14 @@ def rollout(act, env_id: str, frame_skip: Optional[int], dims: list, std: float,
     actions, observations (the positions are noise-free) and return."""
     env = PartialObservation(make_env(env_id, frame_skip), dims, std, hide, seed)
     obs, _ = env.reset(seed=seed)
-    stacker, record, total, done = HistoryStacker(history), {"histories": [], "actions": [], "observations": []}, 0.0, False
+    frames = np.repeat(obs[None], history, axis=0)  # the last H frames, the first one repeated (stack_history's rule)
+    record, total, done = {"histories": [], "actions": [], "observations": []}, 0.0, False
     while not done:
-        histories = stacker.push(obs[None], np.array([len(record["actions"]) == 0]))  # a new episode on the first step
+        histories = frames.reshape(1, -1)
         action = act(histories)[0]
         record["histories"].append(histories[0]), record["actions"].append(action), record["observations"].append(obs)
         obs, reward, terminated, truncated, _ = env.step(action)
+        frames = np.concatenate([frames[1:], obs[None]])
         total, done = total + float(reward), terminated or truncated
     env.close()
     return {**{key: np.array(value) for key, value in record.items()}, "return": total}

@@ -149,21 +149,6 @@ def dagger_beta(round_number: int, beta_rounds: int) -> float:
     return max(0.0, 1.0 - round_number / beta_rounds)
 
 
-class HistoryStacker:
-    """stack_history's rule online: per env of a vector env, the last H frames, oldest first; a new episode
-    starts with its first frame repeated."""
-
-    def __init__(self, history: int):
-        self.history, self.frames = history, None
-
-    def push(self, obs: np.ndarray, episode_start: np.ndarray) -> np.ndarray:
-        if self.frames is None:
-            self.frames = np.repeat(obs[:, None], self.history, axis=1)
-        self.frames = np.concatenate([self.frames[:, 1:], obs[:, None]], axis=1)
-        self.frames[episode_start] = obs[episode_start][:, None]
-        return self.frames.reshape(len(obs), -1)
-
-
 @torch.no_grad()
 def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng: np.random.Generator, device) -> dict:
     """Roll out the beta-mix of expert and learner in the partially observed env for num_labels steps; at every visited
@@ -173,10 +158,12 @@ def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, b
     noise = PartialObservation(env, velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, int(rng.integers(2**31)))
     low, high = env.action_space.low, env.action_space.high
     clean, _ = env.reset(seed=int(rng.integers(2**31)))  # the raw env: noise.observation adds the noise by hand
-    stacker, new_episode = HistoryStacker(args.history), True
+    frames, new_episode = None, True
     record = {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
     for _ in range(num_labels):
-        history = stacker.push(noise.observation(clean)[None], np.array([new_episode]))
+        observed = noise.observation(clean)[None]  # the last H frames, an episode's first one repeated (stack_history's rule)
+        frames = np.repeat(observed, args.history, axis=0) if new_episode else np.concatenate([frames[1:], observed])
+        history = frames.reshape(1, -1)
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         expert_acts = rng.random() < beta
         action = label if expert_acts else policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy().clip(low, high)

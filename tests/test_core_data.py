@@ -12,7 +12,6 @@ import pytest
 import torch
 
 import bc_oh
-import dagger
 from conftest import REPO_ROOT, tiny_args
 
 HOPPER_VELOCITIES = list(range(5, 11))
@@ -78,21 +77,6 @@ def test_stack_history_repeats_the_first_frame_of_each_episode():
     assert frames.tolist() == [[0, 0, 0], [0, 0, 1], [0, 1, 2], [3, 3, 3], [3, 3, 4], [3, 4, 5]]
     assert np.array_equal(rows[:, -2:], observations), "the last frame is o_t"
     assert np.array_equal(bc_oh.stack_history(observations, starts, 1), observations)
-
-
-def test_dagger_history_stacker_agrees_with_stack_history():
-    """Two parallel envs with different episode boundaries, fed step by step (dagger's rollouts, copycat_analysis)."""
-    rng = np.random.default_rng(0)
-    steps, history = 9, 3
-    observations = rng.normal(size=(2, steps, 4))
-    starts = np.zeros((2, steps), bool)
-    starts[:, 0] = True
-    starts[0, 4], starts[1, 2], starts[1, 3] = True, True, True  # env 1 has a one-step episode
-    stacker = dagger.HistoryStacker(history)
-    online = np.array([stacker.push(observations[:, t], starts[:, t]) for t in range(steps)])  # (steps, 2, H*4)
-    for env in range(2):
-        assert np.array_equal(online[:, env], bc_oh.stack_history(observations[env], starts[env], history))
-    assert np.array_equal(online[4, 0], np.tile(observations[0, 4], history)), "a new episode starts with its frame repeated"
 
 
 def test_evaluation_feeds_the_policy_the_history_of_stack_history():
