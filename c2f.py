@@ -177,20 +177,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     fast = device.type == "cuda" and args.cuda_graph
-    if args.two_stage:  # stage 1: the coarse model alone on the coarse loss, then frozen; the fit below is stage 2
-        coarse_optimizer = make_adam(policy.coarse.parameters(), args.learning_rate, fast)
-
-        def coarse_step(idx):
-            loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
-            coarse_optimizer.zero_grad()
-            loss.backward()
-            coarse_optimizer.step()
-            return loss
-
-        print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
-        fit(args, policy, coarse_optimizer, coarse_step, len(inputs), seed, device, fast, evaluate_policy=False)
-        policy.coarse.requires_grad_(False)
-        print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
+    if args.two_stage:  # Table 3's two-stage training: first the coarse model alone, then frozen
+        train_coarse_alone(args, policy, inputs, targets, seed, device, fast)
     optimizer = make_adam([p for p in policy.parameters() if p.requires_grad], args.learning_rate, fast)
 
     def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (with --two-stage the final loss alone)
@@ -205,6 +193,24 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast)
     return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+
+
+def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device, fast: bool):
+    """Stage 1 of --two-stage: the coarse model alone on its loss, by the same loop (fit, without evaluations:
+    the policy is untrained), then frozen. train_seed's fit is then stage 2, on the final loss alone."""
+    optimizer = make_adam(policy.coarse.parameters(), args.learning_rate, fast)
+
+    def coarse_step(idx):
+        loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss
+
+    print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
+    fit(args, policy, optimizer, coarse_step, len(inputs), seed, device, fast, evaluate_policy=False)
+    policy.coarse.requires_grad_(False)
+    print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
 
 
 # Copied from bc_oh.fit
