@@ -490,9 +490,7 @@ def write_atomically(path: str, write):
 # Copied from bc_oh.make_adam
 def make_adam(params, lr: float, fast: bool, **kwargs) -> torch.optim.Adam:
     """Adam; a step captured in a CUDA graph needs its state on the GPU (capturable) and a tensor lr."""
-    if fast:
-        return torch.optim.Adam(params, lr=torch.tensor(lr, device="cuda"), capturable=True, **kwargs)
-    return torch.optim.Adam(params, lr=lr, **kwargs)
+    return torch.optim.Adam(params, lr=torch.tensor(lr, device="cuda") if fast else lr, capturable=fast, **kwargs)
 
 
 # Copied from bc_oh.set_learning_rate
