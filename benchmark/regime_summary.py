@@ -63,11 +63,13 @@ def seeds_text(*counts) -> str:
     return "n=" + " vs ".join(map(str, counts)) + (", incomplete" if min(counts) < COMPLETE else "")
 
 
-def regime_tables(regime: str, records: list, experts: dict, commit: str) -> list:
-    """The markdown lines of one regime: means per env and method, comparisons, and the normalised means over envs."""
+def regime_tables(regime: str, records: list, experts: dict, commit: str, provenance: str = "") -> list:
+    """The markdown lines of one regime: means per env and method, comparisons, and the normalised means over envs.
+    provenance: a file that says where runs not made by `commit` come from (the regime folder's README.md)."""
     scores = {(env, method): [r.score for r in records if (r.env, r.method) == (env, method)] for env in ENVS for method in METHODS}
     flags = " ".join(REGIMES[regime][0]) or "none"
-    lines = [f"**{regime}**: {REGIMES[regime][1]} (flags: `{flags}`; runs made by commit {commit[:12] or '(not recorded)'}).", "",
+    made_by = f"runs made by commit {commit[:12] or '(not recorded)'}" + (f"; others as `{provenance}` says" if provenance else "")
+    lines = [f"**{regime}**: {REGIMES[regime][1]} (flags: `{flags}`; {made_by}).", "",
              "| env | method | mean | 95% interval | seeds | / expert |", "|---|---|---:|---:|---|---:|"]
     normalised = {method: [] for method in METHODS}
     for (env, method), cell in scores.items():
@@ -95,7 +97,7 @@ def regime_tables(regime: str, records: list, experts: dict, commit: str) -> lis
 
 def markdown(tables: dict, empty: list, experts: dict, command: str) -> str:
     """summary.md: a header saying how it was made and what its figures mean, then one part per regime."""
-    count = sum(len(records) for records, _ in tables.values())
+    count = sum(len(records) for records, *_ in tables.values())
     lines = [
         "# The regime map: where copying the previous action becomes a shortcut, and does C2F help there?", "",
         f"Made by `{command}` from {count} per-seed results of `python -m benchmark.regimes`.", "",
@@ -107,8 +109,8 @@ def markdown(tables: dict, empty: list, experts: dict, command: str) -> str:
         "a seed of B (ties count 1/2; 0.5 = no difference), with a stratified bootstrap 95% interval; 'separated' when the "
         f"interval excludes 0.5 and both cells have {COMPLETE} seeds (the protocol fixed before the runs).", "",
     ] + ([f"No valid results yet: {', '.join(empty)}.", ""] if empty else [])
-    for regime, (records, commit) in tables.items():
-        lines += regime_tables(regime, records, experts, commit)
+    for regime, (records, commit, provenance) in tables.items():
+        lines += regime_tables(regime, records, experts, commit, provenance)
     return "\n".join(lines)
 
 
@@ -124,7 +126,7 @@ def plot(tables: dict, path: Path):
     width = 0.8 / len(METHODS)
     for axis, env in zip(axes[0], ENVS):
         for m, method in enumerate(METHODS):
-            for g, (records, _) in enumerate(tables.values()):
+            for g, (records, *_) in enumerate(tables.values()):
                 cell = [r.score for r in records if (r.env, r.method) == (env, method)]
                 if cell:
                     x, mean, (low, high) = g + (m - (len(METHODS) - 1) / 2) * width, statistics.fmean(cell), bootstrap_ci(cell)
@@ -157,8 +159,8 @@ def main(argv=None) -> int:
         records, regime_problems = collect(regime, args.results_dir)
         problems += regime_problems
         if records:
-            commit = runs_dir(regime, args.results_dir) / "commit.txt"
-            tables[regime] = records, commit.read_text().strip() if commit.is_file() else ""
+            commit, provenance = runs_dir(regime, args.results_dir) / "commit.txt", runs_dir(regime, args.results_dir).parent / "README.md"
+            tables[regime] = records, commit.read_text().strip() if commit.is_file() else "", str(provenance) if provenance.is_file() else ""
         else:
             empty.append(regime)
     experts, expert_problems = expert_scores(args.expert_runs)
@@ -166,7 +168,7 @@ def main(argv=None) -> int:
         print(problem, file=sys.stderr)
     if not tables:
         raise UsageError(f"no valid regime results under {args.results_dir} (see above): run python -m benchmark.regimes")
-    for regime, (records, _) in tables.items():
+    for regime, (records, *_) in tables.items():
         rows = "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in records)
         write_text(args.results_dir / regime / "mujoco.csv", "env,method,seed,score\n" + rows)
         aggregate.plot_curves(records, args.results_dir / regime / "curves.png", experts, title=f"Learning curves, {regime}")

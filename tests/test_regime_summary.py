@@ -79,7 +79,7 @@ def plant_variant(runs, method, script, env, seed, returns, **settings):
 def regime_map(tmp_path):
     """native_noise: Hopper BC-SO 100, 300; BC-OH 200, 400; C2F 500, 700; C2F output 600 (and seed 2 without
     --fusion output); Walker2d BC-OH 80. fs1_noise: Hopper BC-OH 50 (and seed 2 at the native rate, and a corrupt
-    seed 3 of BC-SO). Experts: Hopper 1000, Walker2d 400."""
+    seed 3 of BC-SO). Experts: Hopper 1000, Walker2d 400. native_noise has a README.md that says where its runs come from."""
     results, experts = tmp_path / "results" / "regimes", tmp_path / "runs"
     native, fs1 = runs_dir("native_noise", results), runs_dir("fs1_noise", results)
     for method, scores in (("bc_so", (100, 300)), ("bc_oh", (200, 400)), ("c2f", (500, 700))):
@@ -97,6 +97,7 @@ def regime_map(tmp_path):
     result_path(fs1, "bc_so", "Hopper-v4", [3]).write_text("{not json")
     plant_expert(experts, "Hopper-v4", 1000.0)
     plant_expert(experts, "Walker2d-v4", 400.0)
+    (results / "native_noise" / "README.md").write_text("where these runs come from\n")
     return results, experts, problems
 
 
@@ -116,6 +117,8 @@ def test_summary_numbers_files_and_left_out_runs(regime_map, capsys):
     assert (results / "fs1_noise" / "mujoco.csv").read_text() == "env,method,seed,score\nHopper-v4,bc_oh,1,50.000\n"
     summary = (results / "summary.md").read_text()
     assert summary.index("**native_noise**") < summary.index("**fs1_noise**") and "native_hidden" not in summary
+    assert f"runs made by commit (not recorded); others as `{results / 'native_noise' / 'README.md'}` says)." in summary  # its provenance file
+    assert "runs made by commit (not recorded))." in summary  # fs1_noise has none
     assert f"--results-dir {results} --expert-runs {experts}` from 9 per-seed results" in summary
     # mean, interval of the resampled means (200, 300 or 400), seeds, mean / expert 1000
     assert "| Hopper-v4 | BC-OH | 300 | [200, 400] | n=2, incomplete | 0.30 |" in summary
