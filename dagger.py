@@ -190,11 +190,17 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)  # the normaliser keeps the demos' statistics
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam(policy.parameters(), args.learning_rate, fast)  # one optimiser, its moments kept over rounds
-    expert, rollout_rng, rounds, collected = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed), [], []
-    epoch, total_epochs, evaluations, start = 0, args.epochs + args.dagger_rounds * args.dagger_epochs, [], time.time()
-    generator, train_time, all_steps = torch.Generator(device=device).manual_seed(seed), 0.0, 0
-    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
 
+    def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
+        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()  # inputs, targets: the aggregate of the rounds so far
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss
+
+    expert, rollout_rng, rounds, collected, evaluations = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed), [], [], []
+    generator = torch.Generator(device=device).manual_seed(seed)  # one minibatch stream through all rounds
+    progress = {"epoch": 0, "epochs": args.epochs + args.dagger_rounds * args.dagger_epochs, "start": time.time(), "train_time": 0.0, "steps": 0}
     for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
         if round_number > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
             beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
@@ -205,43 +211,45 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
             targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
             rounds.append({"round": round_number, "beta": beta, "labels": num_labels, "expert_fraction": float(data["expert_acted"].mean()), "aggregate": len(inputs)})
-        epochs = args.dagger_epochs if round_number else args.epochs
-        steps_per_epoch = len(inputs) // args.batch_size
-        total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
-
-        def train_step():
-            loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
-            return loss
-
-        train_step = CudaGraphStep(train_step, enabled=fast)  # a new graph per round: the data tensors grew
-        for round_epoch in range(1, epochs + 1):
-            epoch, epoch_start = epoch + 1, time.time()
-            for _ in range(steps_per_epoch):
-                set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-                idx.copy_(torch.randint(len(inputs), (args.batch_size,), device=device, generator=generator))
-                loss = train_step()
-                step += 1
-            last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
-            train_time, all_steps = train_time + time.time() - epoch_start, all_steps + steps_per_epoch
-            if epoch % args.eval_every == 0 or round_epoch == epochs:
-                policy.eval()
-                final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations on disjoint episodes
-                for k in range(3 if final else 1):
-                    evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device)))))
-                policy.train()
-            if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, total_epochs // 20) == 0:
-                eta = (time.time() - start) / epoch * (total_epochs - epoch) / 60
-                last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-                print(f"seed {seed} | round {round_number} | epoch {epoch}/{total_epochs} | loss {last_loss:.5f} | last eval {last} | "
-                      f"{1000 * train_time / all_steps:.2f} ms/step | ETA {eta:.1f} min", flush=True)
+        fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast, round_number, generator, progress, evaluations)
         if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
     return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim,
-            "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data, "ms_per_step": 1000 * train_time / all_steps}
+            "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data, "ms_per_step": 1000 * progress["train_time"] / progress["steps"]}
+
+
+# (fit is this file's own: it trains one round, numbering epochs on from the rounds before (the evaluation seeds, the log),
+# draws minibatches from the one generator of all rounds, and evaluates the final learner three times)
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, round_number: int, generator, progress: dict, evaluations: list):
+    """Run train_step(minibatch indices) for the round's epochs, learning rate decayed linearly to zero; evaluate every --eval-every
+    epochs and after the round's last, appending (epoch, mean return) to evaluations; progress keeps the counts over rounds."""
+    epochs = args.dagger_epochs if round_number else args.epochs
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
+    idx = torch.zeros(args.batch_size, dtype=torch.long, device=device)  # the minibatch's indices, a fixed buffer
+    step_fn = CudaGraphStep(lambda: train_step(idx), enabled=fast)  # a new graph per round: the data tensors grew
+    for round_epoch in range(1, epochs + 1):
+        progress["epoch"] += 1
+        epoch, epoch_start = progress["epoch"], time.time()
+        for _ in range(steps_per_epoch):
+            set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
+            idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            loss = step_fn()
+            step += 1
+        last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
+        progress["train_time"], progress["steps"] = progress["train_time"] + time.time() - epoch_start, progress["steps"] + steps_per_epoch
+        if epoch % args.eval_every == 0 or round_epoch == epochs:
+            policy.eval()
+            final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations on disjoint episodes
+            for k in range(3 if final else 1):
+                evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device)))))
+            policy.train()
+        if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, progress["epochs"] // 20) == 0:
+            eta = (time.time() - progress["start"]) / epoch * (progress["epochs"] - epoch) / 60
+            last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
+            print(f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f} | last eval {last} | "
+                  f"{1000 * progress['train_time'] / progress['steps']:.2f} ms/step | ETA {eta:.1f} min", flush=True)
 
 
 # ==============================================================================================
