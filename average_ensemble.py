@@ -155,23 +155,22 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
 
-    def train_step(idx):  # behavioural cloning of both members: an Adam step on the sum of their MSEs
+    def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         losses = {name: ((member(inputs[idx]) - targets[idx]) ** 2).mean() for name, member in policy.members.items()}
-        loss = sum(losses.values())  # disjoint parameters, per-parameter Adam: each member trains exactly as if alone
+        loss = sum(losses.values())  # of both members; disjoint parameters, per-parameter Adam: each trains exactly as if alone
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return losses
 
     evaluations, member_evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, fast)
-    return {"evaluations": evaluations, "member_evaluations": member_evaluations, "policy": policy, "obs_dim": obs_dim,
-            "act_dim": act_dim, "ms_per_step": ms_per_step}
+    return {"evaluations": evaluations, "member_evaluations": member_evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
 
 
 # (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
 def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
     """Run train_step(minibatch indices) for --epochs, learning rate decayed linearly to zero; evaluate every --eval-every
-    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], each member's, ms per step)."""
+    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], {member: those}, ms per step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     member_evaluations = {name: [] for name in policy.members}
@@ -189,10 +188,9 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
         train_time += time.time() - epoch_start
         if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
             policy.eval()
-            eval_seed = 10_000 * seed + epoch  # the same episodes (starts and noise) for the ensemble and its members
-            evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, eval_seed, device)))))
-            for name, member in policy.members.items():
-                member_evaluations[name].append((epoch, float(np.mean(evaluate(member, args, args.eval_episodes, eval_seed, device)))))
+            evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
+            for name, member in policy.members.items():  # on the ensemble's episodes (the same starts and noise)
+                member_evaluations[name].append((epoch, float(np.mean(evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60

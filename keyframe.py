@@ -204,8 +204,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     fast = device.type == "cuda" and args.cuda_graph
     optimizer = make_adam(policy.parameters(), args.learning_rate, fast)
 
-    def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions, weighted per sample
-        error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)
+    def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
+        error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)  # per sample, then weighted
         loss = ((weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)) * error).mean()
         optimizer.zero_grad()
         loss.backward()
