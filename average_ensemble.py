@@ -168,9 +168,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
 
 # (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
-def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
+def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
     """Run train_step(minibatch indices) for --epochs, learning rate decayed linearly to zero; evaluate every --eval-every
-    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], {member: those}, ms per step)."""
+    epochs and after the last. Returns ([(epoch, mean return)], {member: those}, ms per step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     member_evaluations = {name: [] for name in policy.members}
@@ -186,7 +186,7 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
             step += 1
         loss_text = ", ".join(f"{name} {value.item():.5f}" for name, value in losses.items())  # .item() waits for the GPU
         train_time += time.time() - epoch_start
-        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
+        if epoch % args.eval_every == 0 or epoch == args.epochs:
             policy.eval()
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             for name, member in policy.members.items():  # on the ensemble's episodes (the same starts and noise)

@@ -191,9 +191,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
 
 # (fit is this file's own: it decays the adversary's learning rate too, and logs the adversary's mean error)
-def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num_samples: int, seed: int, device, fast: bool, evaluate_policy: bool = True) -> tuple:
-    """Run train_step(minibatch indices) for --epochs, learning rate decayed linearly to zero; evaluate every --eval-every
-    epochs and after the last (unless evaluate_policy is False). Returns ([(epoch, mean return)], ms per training step)."""
+def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
+    """Run train_step(minibatch indices) for --epochs, both learning rates decayed linearly to zero; evaluate every --eval-every
+    epochs and after the last. Returns ([(epoch, mean return)], ms per training step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
@@ -210,7 +210,7 @@ def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
         train_time += time.time() - epoch_start
-        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
+        if epoch % args.eval_every == 0 or epoch == args.epochs:
             policy.eval()
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
