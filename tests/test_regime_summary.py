@@ -129,6 +129,9 @@ def test_summary_numbers_files_and_left_out_runs(regime_map, capsys):
     assert "| Hopper-v4 | P(C2F (output fusion) > BC-OH) | 1.00 | [1.00, 1.00] | n=1 vs 2, incomplete | undecided (fewer than 5 seeds) |" in summary
     # 200 and 400 against 100 and 300: 3 of 4 pairs; a resample of 200, 200 against 300, 300 (1/16) gives 0, one of 400, 400 gives 1
     assert "| Hopper-v4 | P(BC-OH > BC-SO) | 0.75 | [0.00, 1.00] | n=2 vs 2, incomplete | undecided (fewer than 5 seeds) |" in summary
+    # 500 and 700 against 100 and 300: every pair; a comparison added after the runs says so
+    assert ("| Hopper-v4 | P(Coarse-to-fine > BC-SO) | 1.00 | [1.00, 1.00] | n=2 vs 2, incomplete | "
+            "undecided (fewer than 5 seeds), exploratory (added after the runs) |") in summary
     # over envs: BC-OH (0.30 + 0.20) / 2; the others on Hopper only
     assert ("Expert-normalised mean over envs: BC-SO 0.20 (1 env); BC-OH 0.25 (2 envs); Coarse-to-fine 0.60 (1 env); "
             "C2F (output fusion) 0.60 (1 env).") in summary
@@ -184,3 +187,4 @@ def test_the_verdict_needs_five_seeds_a_cell_and_an_interval_that_excludes_one_h
     assert "| Hopper-v4 | P(BC-OH > BC-SO) | 1.00 | [1.00, 1.00] | n=5 vs 5 | separated |" in lines
     # c2f against bc_oh: 19 wins 0, 20 ties once (0.5), 21 wins 1 + tie, 23 wins 3 + tie, 25 wins 5: 10.5 of 25 pairs
     assert "| Hopper-v4 | P(Coarse-to-fine > BC-OH) | 0.42 |" in lines and "n=5 vs 5 | not separated (more seeds) |" in lines
+    assert "| Hopper-v4 | P(Coarse-to-fine > BC-SO) | 1.00 | [1.00, 1.00] | n=5 vs 5 | separated, exploratory (added after the runs) |" in lines
