@@ -439,7 +439,7 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
     demos["episode_starts"][0] = True
     print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
-          "(near 0: copying the last action is a shortcut)")
+          "(near 0 means copying the last action is a shortcut)")
     return demos
 
 
