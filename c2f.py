@@ -13,6 +13,8 @@ of the paper's Table 3; each changes only what it names.
 import hashlib
 import json
 import os
+import platform
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -70,8 +72,8 @@ class Args:
     """train on the GPU when there is one"""
     cuda_graph: bool = True
     """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
-    fusion: Literal["late", "output", "middle", "early"] = "late"
-    """where sg(zeta) joins the policy MLP: late = beside its last hidden feature, into one more linear layer (the paper's CARLA text); output = the MLP outputs an action-sized vector and one more linear layer maps [it, sg(zeta)] to the action (a reading of the paper's MuJoCo text, section 8.3); middle = into its second hidden layer; early = beside the history, into its input"""
+    fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
+    """where sg(zeta) joins the policy MLP: late = beside its last hidden feature, into one more linear layer (the paper's CARLA text); output = the MLP outputs an action-sized vector and one more linear layer maps [it, sg(zeta)] to the action (a reading of the paper's MuJoCo text, section 8.3); middle = into its second hidden layer; early = beside the history, into its input; penultimate = BC-OH's own MLP, zeta joined before its last layer (the CARLA text read literally: BC-OH's capacity plus zeta)"""
     coarse_output: Literal["action", "feature"] = "action"
     """what the coarse model passes on: its action zeta (the paper) or its last hidden feature (width --hidden; the action head still learns from the coarse loss)"""
     coarse_input: Literal["current", "history"] = "current"
@@ -80,6 +82,8 @@ class Args:
     """input of the policy model: the whole history (BC-OH, the paper) or the current frame o_t (BC-SO)"""
     stop_gradient: bool = True
     """stop the final loss's gradient at zeta (the paper); --no-stop-gradient lets it train the coarse model too"""
+    coarse_action: bool = True
+    """feed sg(zeta) to the policy (the paper); --no-coarse-action is the capacity control: zeros in its place and no coarse loss (BC-OH on C2F's history network)"""
     two_stage: bool = False
     """first train the coarse model alone for --epochs and freeze it, then the rest for --epochs with the final loss (evaluations in stage 2)"""
 
@@ -108,67 +112,47 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """C2F (section 8.3): a coarse MLP on o_t gives an action zeta; a three-layer policy MLP on the history
-    gives a feature; one more linear layer maps [feature, sg(zeta)] to the final action."""
+    """C2F as the paper draws it (section 8.3, Fig. 10): a coarse MLP pi_phi on o_t gives an action zeta; a
+    three-layer policy MLP pi_theta on the history gives a feature; one more linear layer maps [feature,
+    sg(zeta)] to the final action. (Table3Policy below builds every ablation of Table 3.)"""
 
-    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
-                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True):
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
+        self.obs_dim = obs_dim
         self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
-        self.coarse_input, self.policy_input = coarse_input, policy_input
-        self.ablation = (fusion, coarse_output, coarse_input, policy_input, stop_gradient) != ("late", "action", "current", "history", True)
-        self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
-        fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "output")}
-        policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
-        self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
-        if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
-            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
-        else:
-            self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
-        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
-        self.head = nn.Linear(width + extra["late"] + extra["output"], act_dim)  # the one more linear layer of the paper
+        self.coarse = mlp(obs_dim, act_dim, hidden)  # pi_phi(o_t) = zeta
+        # pi_theta's three hidden layers on the history, in two parts only so that --fusion middle can join between them
+        self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
+        self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+        self.head = nn.Linear(hidden + act_dim, act_dim)  # the one more fully-connected layer, on [feature, sg(zeta)]
 
     def coarse_model(self, obs_history):
         """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
-        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
+        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.obs_dim:])
         return self.coarse[-1](feature), feature
 
     def coarse_and_final(self, obs_history):
         """(zeta, final action = pi_theta(history, sg(zeta))): the two outputs Eq. 2 trains."""
-        if self.ablation:
-            return self.ablated_coarse_and_final(obs_history)
         zeta = self.coarse_model(obs_history)[0]
         feature = self.policy_rest(self.policy_first(self.normalize(obs_history)))
-        return zeta, self.head(torch.cat([feature, zeta.detach()], dim=1))
+        return zeta, self.head(torch.cat([feature, zeta.detach()], dim=1))  # detach() is the stop-gradient sg
 
     def forward(self, obs_history):
         return self.coarse_and_final(obs_history)[1]
 
-    # ---- Table 3's ablations (and --fusion output): each flag changes only what it names ----
-
-    def pick(self, x, which: str):
-        """The normalised history itself, or its last frame o_t."""
-        return x if which == "history" else x[:, -self.obs_dim:]
-
-    def ablated_coarse_and_final(self, obs_history):
-        zeta, feature = self.coarse_model(obs_history)
-        fed = feature if self.coarse_output == "feature" else zeta
-        fed = fed.detach() if self.stop_gradient else fed
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
-        h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
-        h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(join(h, "late"), "output"))
-
 
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
-    return Policy(obs_dim, act_dim, args.history, args.hidden, inputs, args.fusion, args.coarse_output,
-                  args.coarse_input, args.policy_input, args.stop_gradient)
+    """The paper's model, or at any Table 3 flag the ablation's."""
+    flags = {name: getattr(args, name) for name in PAPER_FLAGS}
+    if flags == PAPER_FLAGS:
+        return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
+    return Table3Policy(obs_dim, act_dim, args.history, args.hidden, inputs, **flags)
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:
     """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
+    if args.two_stage and not args.coarse_action:
+        raise UsageError("--two-stage trains the coarse model first, --no-coarse-action never uses it: pass one of them")
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -184,7 +168,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (with --two-stage the final loss alone)
         zeta, action = policy.coarse_and_final(inputs[idx])
         loss = ((action - targets[idx]) ** 2).mean()
-        if not args.two_stage:
+        if not args.two_stage and args.coarse_action:
             loss = loss + ((zeta - targets[idx]) ** 2).mean()
         optimizer.zero_grad()
         loss.backward()
@@ -211,6 +195,59 @@ def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torc
     fit(args, policy, optimizer, coarse_step, len(inputs), seed, device, fast, evaluate_policy=False)
     policy.coarse.requires_grad_(False)
     print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
+
+
+# ---- Table 3's ablations, and the capacity controls: each flag changes only what it names ----
+
+PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True)
+"""the model flags of Args at the paper's values (--two-stage changes the training, not the model)"""
+
+
+class Table3Policy(nn.Module):
+    """Policy with every Table 3 choice open. At PAPER_FLAGS it builds the same layers in the same order (so the
+    same seed gives the same initial weights) and computes the same outputs. penultimate = BC-OH's own two-hidden-
+    layer MLP with sg(zeta) joined before its last layer; coarse_action=False feeds zeros instead of sg(zeta)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
+                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
+        self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
+        self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
+        fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
+        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "penultimate", "output")}
+        policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
+        self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
+        if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
+            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
+        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
+            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
+        else:
+            self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
+        self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
+
+    def pick(self, x, which: str):
+        """The normalised history itself, or its last frame o_t."""
+        return x if which == "history" else x[:, -self.obs_dim:]
+
+    def coarse_model(self, obs_history):
+        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
+        return self.coarse[-1](feature), feature
+
+    def coarse_and_final(self, obs_history):
+        zeta, feature = self.coarse_model(obs_history)
+        fed = feature if self.coarse_output == "feature" else zeta
+        fed = fed.detach() if self.stop_gradient else fed
+        fed = fed if self.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
+        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
+        h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
+        h = self.policy_rest(join(h, "middle"))
+        return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))
+
+    def forward(self, obs_history):
+        return self.coarse_and_final(obs_history)[1]
 
 
 # Copied from bc_oh.fit
@@ -304,7 +341,8 @@ def run(args):
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
     recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
-    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores)),
+               "machine": machine()}
     write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
     print(f"\n{'seed':>6} | {'score':>8}")
     for seed, score in zip(args.seeds, scores):
@@ -541,6 +579,16 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
     return np.concatenate(frames, axis=1)
+
+
+# Copied from bc_oh.machine
+def machine() -> dict:
+    """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
+    cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
+    cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
+    return {"cpu": cpu[1] if cpu else platform.processor(), "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "MKL_CBWR": os.environ.get("MKL_CBWR"), "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+            "torch": torch.__version__, "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
 
 
 # Copied from bc_oh.write_atomically

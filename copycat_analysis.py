@@ -377,60 +377,52 @@ class OHPolicy(nn.Module):
         return self.net(self.normalize(obs_history))
 
 
-# Copied from c2f.Policy with Policy->C2FPolicy
+# Copied from c2f.Table3Policy with Table3Policy->C2FPolicy
 class C2FPolicy(nn.Module):
-    """C2F (section 8.3): a coarse MLP on o_t gives an action zeta; a three-layer policy MLP on the history
-    gives a feature; one more linear layer maps [feature, sg(zeta)] to the final action."""
+    """Policy with every Table 3 choice open. At PAPER_FLAGS it builds the same layers in the same order (so the
+    same seed gives the same initial weights) and computes the same outputs. penultimate = BC-OH's own two-hidden-
+    layer MLP with sg(zeta) joined before its last layer; coarse_action=False feeds zeros instead of sg(zeta)."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
-                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True):
+                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True):
         super().__init__()
         self.normalize = Normalizer(inputs)
         self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
-        self.coarse_input, self.policy_input = coarse_input, policy_input
-        self.ablation = (fusion, coarse_output, coarse_input, policy_input, stop_gradient) != ("late", "action", "current", "history", True)
+        self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "output")}
+        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "penultimate", "output")}
         policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
         self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
         if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
+        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
+            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
             self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
-        self.head = nn.Linear(width + extra["late"] + extra["output"], act_dim)  # the one more linear layer of the paper
-
-    def coarse_model(self, obs_history):
-        """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
-        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
-        return self.coarse[-1](feature), feature
-
-    def coarse_and_final(self, obs_history):
-        """(zeta, final action = pi_theta(history, sg(zeta))): the two outputs Eq. 2 trains."""
-        if self.ablation:
-            return self.ablated_coarse_and_final(obs_history)
-        zeta = self.coarse_model(obs_history)[0]
-        feature = self.policy_rest(self.policy_first(self.normalize(obs_history)))
-        return zeta, self.head(torch.cat([feature, zeta.detach()], dim=1))
-
-    def forward(self, obs_history):
-        return self.coarse_and_final(obs_history)[1]
-
-    # ---- Table 3's ablations (and --fusion output): each flag changes only what it names ----
+        self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
 
     def pick(self, x, which: str):
         """The normalised history itself, or its last frame o_t."""
         return x if which == "history" else x[:, -self.obs_dim:]
 
-    def ablated_coarse_and_final(self, obs_history):
+    def coarse_model(self, obs_history):
+        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
+        return self.coarse[-1](feature), feature
+
+    def coarse_and_final(self, obs_history):
         zeta, feature = self.coarse_model(obs_history)
         fed = feature if self.coarse_output == "feature" else zeta
         fed = fed.detach() if self.stop_gradient else fed
+        fed = fed if self.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
         join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
         h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(join(h, "late"), "output"))
+        return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))
+
+    def forward(self, obs_history):
+        return self.coarse_and_final(obs_history)[1]
 
 
 def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
@@ -456,7 +448,7 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
         policy = OHPolicy(obs_dim, act_dim, history, hidden, inputs)
     else:
         policy = C2FPolicy(obs_dim, act_dim, history, hidden, inputs, saved["fusion"], saved["coarse_output"],
-                           saved["coarse_input"], saved["policy_input"], saved["stop_gradient"])
+                           saved["coarse_input"], saved["policy_input"], saved["stop_gradient"], saved.get("coarse_action", True))
     try:
         policy.load_state_dict(checkpoint["state_dict"])
     except RuntimeError:

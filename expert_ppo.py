@@ -11,7 +11,9 @@ the actor, the frozen observation-normalisation statistics, the action bounds, e
 args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
 """
 import os
+import platform
 import random
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -215,6 +217,16 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 # Checkpoints
 
 
+# Copied from bc_oh.machine
+def machine() -> dict:
+    """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
+    cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
+    cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
+    return {"cpu": cpu[1] if cpu else platform.processor(), "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "MKL_CBWR": os.environ.get("MKL_CBWR"), "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+            "torch": torch.__version__, "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
+
+
 # Copied from bc_oh.write_atomically
 def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
@@ -251,6 +263,7 @@ def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, 
         "args": asdict(args),
         "global_step": global_step,
         "eval_return": eval_return,
+        "machine": machine(),  # where it was trained (checkpoints made before this have none)
         # only needed to resume training:
         "agent": agent.state_dict(),
         "optimizer": optimizer.state_dict(),

@@ -11,6 +11,8 @@ random makes copying the previous action from it less reliable. In evaluation th
 import hashlib
 import json
 import os
+import platform
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -234,7 +236,8 @@ def run(args):
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
     recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
-    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores))}
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores)),
+               "machine": machine()}
     write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
     print(f"\n{'seed':>6} | {'score':>8}")
     for seed, score in zip(args.seeds, scores):
@@ -471,6 +474,16 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
     return np.concatenate(frames, axis=1)
+
+
+# Copied from bc_oh.machine
+def machine() -> dict:
+    """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
+    cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
+    cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
+    return {"cpu": cpu[1] if cpu else platform.processor(), "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "MKL_CBWR": os.environ.get("MKL_CBWR"), "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+            "torch": torch.__version__, "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
 
 
 # Copied from bc_oh.write_atomically

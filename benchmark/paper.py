@@ -23,6 +23,15 @@ METHOD_NAMES = {
     "history_dropout": "History-Dropout", "average_ensemble": "Average-Ensemble", "dagger": "DAgger 8K",
     "expert": "PPO expert",
     "c2f_output": "C2F (output fusion)",
+    "c2f_middle": "C2F (middle fusion)",
+    "c2f_early": "C2F (early fusion)",
+    "c2f_penultimate": "C2F (penultimate fusion)",
+    "c2f_feature": "C2F (feature as ζ)",
+    "c2f_coarse_history": "C2F (BC-OH as π_φ and π_θ)",
+    "c2f_coarse_history_policy_current": "C2F (BC-OH as π_φ, BC-SO as π_θ)",
+    "c2f_no_stop_gradient": "C2F (no stop-gradient)",
+    "c2f_two_stage": "C2F (two-stage)",
+    "c2f_no_coarse": "C2F (no coarse action)",
 }
 """the paper's row names, in the paper's row order"""
 
@@ -62,9 +71,10 @@ def setting_differences(args: dict, wanted: dict, env_id: str) -> list:
     """Readable 'name got != wanted' for every field of `wanted` on which a run's args differ.
 
     None in the run's args stands for the script's default (the paper's value) for DEFAULTED fields; a
-    field missing from the run's args was made before the flag existed, at what is now its default.
+    field missing from the run's args was made before the flag existed, at what is now its default
+    (the paper's setting, or a method flag's default).
     """
-    defaults = paper_settings(env_id)
+    defaults = {**paper_settings(env_id), **{name: value for flags in METHOD_FLAGS.values() for name, value in flags.items()}}
     differences = []
     for name, want in wanted.items():
         got = args.get(name)
@@ -86,8 +96,25 @@ def same_value(a, b) -> bool:
     return a == b
 
 
-VARIANTS = {"c2f_output": ("c2f", {"fusion": "output"})}
-"""method name -> (method script, its flags): a method file run with settings that make it another method"""
+METHOD_FLAGS = {"c2f": {"fusion": "late", "coarse_output": "action", "coarse_input": "current", "policy_input": "history",
+                        "stop_gradient": True, "coarse_action": True, "two_stage": False}}
+"""method script -> its method flags at their defaults: a result of the script's own method must have them all
+(an ablation is not the method), and a result made before a flag existed was made at its default"""
+
+VARIANTS = {
+    "c2f_output": ("c2f", {"fusion": "output"}),
+    "c2f_middle": ("c2f", {"fusion": "middle"}),
+    "c2f_early": ("c2f", {"fusion": "early"}),
+    "c2f_penultimate": ("c2f", {"fusion": "penultimate"}),
+    "c2f_feature": ("c2f", {"coarse_output": "feature"}),
+    "c2f_coarse_history": ("c2f", {"coarse_input": "history"}),
+    "c2f_coarse_history_policy_current": ("c2f", {"coarse_input": "history", "policy_input": "current"}),
+    "c2f_no_stop_gradient": ("c2f", {"stop_gradient": False}),
+    "c2f_two_stage": ("c2f", {"two_stage": True}),
+    "c2f_no_coarse": ("c2f", {"coarse_action": False}),
+}
+"""method name -> (method script, its flags): a method file run with settings that make it another method
+(the Table 3 rows of c2f.py, and the capacity controls)"""
 
 
 def script_of(method: str) -> str:
@@ -95,9 +122,14 @@ def script_of(method: str) -> str:
     return VARIANTS[method][0] if method in VARIANTS else method
 
 
-def variant_settings(method: str) -> dict:
-    """The Args fields that make `method` out of its script ({} for a plain method file)."""
+def variant_flags(method: str) -> dict:
+    """The flags that make `method` out of its script, as its command passes them ({} for a plain method file)."""
     return dict(VARIANTS[method][1]) if method in VARIANTS else {}
+
+
+def variant_settings(method: str) -> dict:
+    """Every method flag a result of `method` must have: its script's defaults, changed by the variant's flags."""
+    return {**METHOD_FLAGS.get(script_of(method), {}), **variant_flags(method)}
 
 
 def as_flags(settings: dict) -> list:

@@ -6,8 +6,9 @@
 Each regime is a setting of the shared flags of the method files (control rate, kind of partial
 observability); everything else is the paper's protocol (benchmark.paper.paper_settings). For every regime
 asked for, this runs benchmark.run_grid over METHODS x ENVS x --seeds into results/regimes/<regime>/runs/
-(finished runs are skipped, so an interrupted map resumes), and records in <regime>/runs/commit.txt the
-commit of the scripts that made the runs: a map must be made by one code version.
+(finished runs are skipped, so an interrupted map resumes), and records in <regime>/runs/<method>/commit.txt
+the commit of the scripts that made the runs: a method's runs in a regime must be made by one code version.
+(The map's first methods share <regime>/runs/commit.txt.)
 """
 import subprocess
 from pathlib import Path
@@ -43,14 +44,17 @@ def scripts_commit(scripts_dir: Path) -> str:
     return head.stdout.strip()
 
 
-def record_commit(folder: Path, commit: str):
-    """Write commit.txt, or check that the runs already there were made by the same commit."""
-    path = folder / "commit.txt"
-    if path.is_file() and path.read_text().strip() != commit:
-        raise UsageError(f"{folder} holds runs made by commit {path.read_text().strip()[:12]}, not {commit[:12]}: "
+def record_commit(folder: Path, commit: str, method: str):
+    """Write <method>/commit.txt, or check that the method's runs already there were made by the same commit.
+    A method folder without its own commit.txt was made by the commit of the regime's commit.txt (the map's
+    first runs); a method added later (a control, a Table 3 row) records its own."""
+    own, regime = folder / method / "commit.txt", folder / "commit.txt"
+    recorded = own if own.is_file() else regime if regime.is_file() and (folder / method).is_dir() else None
+    if recorded is not None and recorded.read_text().strip() != commit:
+        raise UsageError(f"{folder / method} holds runs made by commit {recorded.read_text().strip()[:12]}, not {commit[:12]}: "
                          "run from a worktree of that commit (git worktree add ../map <commit>)")
-    if not path.is_file():
-        write_text(path, commit + "\n")
+    if recorded is None:
+        write_text(own, commit + "\n")
 
 
 def main(argv=None) -> int:
@@ -62,6 +66,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="runs at the same time (default 2)")
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"default: {RESULTS_DIR}")
     parser.add_argument("--scripts-dir", type=Path, default=run_grid.REPO_ROOT, help="checkout whose scripts run (default: this one)")
+    parser.add_argument("--save-model", action="store_true", help="save each run's model beside its result (for copycat_analysis.py)")
     parser.add_argument("--dry-run", action="store_true", help="list what would run")
     args = parser.parse_args(argv)
     commit = scripts_commit(args.scripts_dir)
@@ -69,11 +74,12 @@ def main(argv=None) -> int:
     for regime in args.regimes:
         folder = runs_dir(regime, args.results_dir).resolve()
         if not args.dry_run:
-            record_commit(folder, commit)
+            for method in args.methods:
+                record_commit(folder, commit, method)
         print(f"== {regime}: {REGIMES[regime][1]}", flush=True)
         grid = ["--methods", *args.methods, "--envs", *args.envs, "--seeds", *map(str, args.seeds), "--workers", str(args.workers),
                 "--results-dir", str(folder), "--scripts-dir", str(args.scripts_dir), *(["--dry-run"] if args.dry_run else [])]
-        flags = REGIMES[regime][0]
+        flags = REGIMES[regime][0] + (["--save-model"] if args.save_model else [])
         status = max(status, run_grid.main(grid + ([f"--extra-args={' '.join(flags)}"] if flags else [])))  # one word: argparse takes "--x" for a flag
     return status
 

@@ -29,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmark.paper import VARIANTS, as_flags, paper_settings, script_of, setting_differences, variant_settings
+from benchmark.paper import VARIANTS, as_flags, paper_settings, script_of, setting_differences, variant_flags, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, make_result, read_result, result_path, run_cli, write_text
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -68,7 +68,9 @@ class Options:
 
 def parse_options(argv=None) -> Options:
     parser = OneLineParser(prog="python -m benchmark.run_grid", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--methods", nargs="+", required=True, help="method file names without .py, and/or `expert`")
+    parser.add_argument("--methods", nargs="+", required=True, help="method file names without .py, their variants ("
+                        + ", ".join(f"{name} = {script}.py {' '.join(as_flags(flags))}" for name, (script, flags) in VARIANTS.items())
+                        + "), and/or `expert`")
     parser.add_argument("--envs", nargs="+", required=True, help="gymnasium MuJoCo env ids, e.g. Hopper-v4")
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3], help="training seeds (default 1 2 3)")
     parser.add_argument("--workers", type=int, default=1, help="runs at the same time (default 1)")
@@ -195,7 +197,26 @@ def command(run: Run, options: Options) -> list:
         return [sys.executable, "expert_ppo.py", "--eval-only", "--env", run.env, "--checkpoint", f"experts/{run.env}.pt",
                 "--eval-episodes", str(options.expert_episodes)]
     return [sys.executable, f"{script_of(run.method)}.py", "--env", run.env, "--seeds", str(run.seed), "--output-dir", str(output_dir(run, options)),
-            *as_flags(variant_settings(run.method)), *options.extra_args, *(["--cuda"] if options.cuda else [])]
+            *as_flags(variant_flags(run.method)), *options.extra_args, *(["--cuda"] if options.cuda else [])]
+
+
+def shown_command(cmd: list) -> list:
+    """The command as a log shows it: a path inside a git checkout relative to that checkout's root (the results
+    may live in another checkout than the scripts, e.g. a worktree), so a committed log names no machine."""
+    def shown(word: str) -> str:
+        path = Path(word)
+        root = next((folder for folder in path.parents if (folder / ".git").exists()), None) if path.is_absolute() else None
+        return str(path.relative_to(root)) if root else word
+    return [shown(word) for word in cmd[1:]]
+
+
+def machine() -> dict:
+    """The method files' record of where a run was made (bc_oh.machine), for the first lines of a grid's log."""
+    if str(REPO_ROOT) not in sys.path:
+        sys.path.insert(0, str(REPO_ROOT))
+    from bc_oh import machine as method_files_machine  # here: importing torch and gymnasium is slow
+
+    return method_files_machine()
 
 
 def why_not_done(run: Run, options: Options):
@@ -267,7 +288,7 @@ def execute(run: Run, options: Options, processes: Processes):
     log.parent.mkdir(parents=True, exist_ok=True)
     cmd = command(run, options)
     with open(log, "w") as file:
-        file.write(f"$ python {shlex.join(cmd[1:])}\n")
+        file.write(f"$ python {shlex.join(shown_command(cmd))}\n# machine: {json.dumps(machine())}\n")
         file.flush()
         returncode = processes.run(cmd, options.scripts_dir, file, child_env(options))
     if returncode != 0:

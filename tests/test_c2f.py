@@ -1,5 +1,6 @@
 """c2f.py: the coarse-to-fine model, its stop-gradient, two-stage training and every Table 3 ablation flag;
 bc_so.py's policy (o_t only); the same seed twice gives the same training on CPU."""
+import argparse
 import copy
 import re
 
@@ -12,13 +13,15 @@ import c2f
 from conftest import fake_demos, skip_evaluation, tiny_args
 
 OBS, ACT, H, HIDDEN = 11, 3, 3, 16
-DEFAULTS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True)
+DEFAULTS = c2f.PAPER_FLAGS
 
 
 def model(seed=0, **flags):
+    """The model c2f.py builds for these flags: the paper's Policy at the defaults, else Table3Policy."""
     torch.manual_seed(seed)
     inputs = torch.randn(64, H * OBS) * 3 + 1
-    return c2f.Policy(OBS, ACT, H, HIDDEN, inputs, **{**DEFAULTS, **flags})
+    args = argparse.Namespace(history=H, hidden=HIDDEN, **{**DEFAULTS, **flags})
+    return c2f.make_policy(args, OBS, ACT, inputs)
 
 
 def batch(seed=1):
@@ -246,18 +249,96 @@ def test_bc_so_result_does_not_depend_on_history(monkeypatch, capsys):
     assert all(torch.equal(one[name], three[name]) for name in one)
 
 
-def test_the_paper_path_is_the_general_path_at_the_paper_flags():
-    """The default model reads as the paper's (plain lines); the ablation section's general path, run on the
-    same model, gives exactly the same outputs and the same gradients."""
+def test_the_paper_model_is_table3s_model_at_the_paper_flags():
+    """The default model reads as the paper's (plain lines); Table3Policy at the paper's flags builds the same
+    layers in the same order (the same seed gives the same initial weights) and gives exactly the same outputs
+    and gradients."""
     policy, (obs_history, target) = model(), batch()
-    assert not policy.ablation and all(model(**{name: value}).ablation for name, value in
-                                       [("fusion", "output"), ("coarse_input", "history"), ("stop_gradient", False)])
-    plain, general = policy.coarse_and_final(obs_history), policy.ablated_coarse_and_final(obs_history)
-    assert all(torch.equal(a, b) for a, b in zip(plain, general))
+    torch.manual_seed(0)
+    general = c2f.Table3Policy(OBS, ACT, H, HIDDEN, torch.randn(64, H * OBS) * 3 + 1, **DEFAULTS)
+    assert type(policy) is c2f.Policy and all(type(model(**{name: value})) is c2f.Table3Policy for name, value in
+                                                [("fusion", "output"), ("coarse_input", "history"), ("stop_gradient", False), ("coarse_action", False)])
+    assert list(policy.state_dict()) == list(general.state_dict())
+    assert all(torch.equal(a, b) for a, b in zip(policy.state_dict().values(), general.state_dict().values()))
+    assert all(torch.equal(a, b) for a, b in zip(policy.coarse_and_final(obs_history), general.coarse_and_final(obs_history)))
     gradients = []
-    for outputs in (policy.coarse_and_final, policy.ablated_coarse_and_final):
-        policy.zero_grad()
-        zeta, final = outputs(obs_history)
+    for net in (policy, general):
+        zeta, final = net.coarse_and_final(obs_history)
         (((final - target) ** 2).mean() + ((zeta - target) ** 2).mean()).backward()
-        gradients.append([p.grad.clone() for p in policy.parameters()])
+        gradients.append([p.grad.clone() for p in net.parameters()])
     assert all(torch.equal(a, b) for a, b in zip(*gradients))
+
+
+# ----------------------------------------------------------------------------------------------
+# The capacity controls: --no-coarse-action and --fusion penultimate
+
+
+def count(module) -> int:
+    return sum(p.numel() for p in module.parameters())
+
+
+def history_path(policy) -> int:
+    return count(policy.policy_first) + count(policy.policy_rest) + count(policy.head)
+
+
+def test_the_controls_capacity_on_hopper():
+    """No coarse action: C2F's history path exactly; penultimate: BC-OH's MLP plus the coarse model plus act_dim^2
+    weights (README's and NOTES' figures: BC-OH 72,451, C2F 207,887 with a 138,252 history path)."""
+    torch.manual_seed(0)
+    inputs = torch.randn(64, 2 * 11)
+    build = lambda **flags: c2f.make_policy(argparse.Namespace(history=2, hidden=256, **{**DEFAULTS, **flags}), 11, 3, inputs)
+    paper, control, penultimate = build(), build(coarse_action=False), build(fusion="penultimate")
+    bc_oh_net = bc_oh.Policy(11, 3, 2, 256, inputs)
+    assert (count(bc_oh_net), count(paper), history_path(paper)) == (72451, 207887, 138252)
+    assert count(control) == count(paper) and history_path(control) == history_path(paper)
+    assert count(penultimate) == count(bc_oh_net) + count(paper.coarse) + 3 * 3 == 142095
+    assert history_path(penultimate) == count(bc_oh_net) + 3 * 3
+    assert [m.out_features for m in penultimate.modules() if isinstance(m, torch.nn.Linear)][3:] == [256, 256, 3], "two hidden layers, as BC-OH"
+
+
+def test_penultimate_joins_zeta_before_bc_ohs_last_layer():
+    policy = model(fusion="penultimate")
+    obs_history, target = batch()
+    zeta, _, final, seen = capture_inputs(policy, ["head", "policy_rest.0"], obs_history)
+    assert policy.head.in_features == HIDDEN + ACT and seen["head"].shape == (8, HIDDEN + ACT)
+    assert torch.equal(seen["head"][:, -ACT:], zeta)
+    assert torch.equal(seen["head"][:, :HIDDEN], policy.policy_rest(policy.policy_first(policy.normalize(obs_history))))
+    ((final - target) ** 2).mean().backward()
+    assert all(p.grad is None or not p.grad.any() for p in policy.coarse.parameters()), "sg(zeta)"
+
+
+def test_no_coarse_action_feeds_zeros_and_ignores_the_coarse_model():
+    policy = model(coarse_action=False)
+    obs_history, target = batch()
+    zeta, _, final, seen = capture_inputs(policy, ["head"], obs_history)
+    assert seen["head"].shape == (8, HIDDEN + ACT) and not seen["head"][:, -ACT:].any(), "zeros where sg(zeta) was"
+    paper = model()
+    assert all(torch.equal(a, b) for a, b in zip(paper.state_dict().values(), policy.state_dict().values())), \
+        "the same seed starts the control from C2F's own initial weights"
+    with torch.no_grad():
+        policy.coarse[-1].bias += 1.0
+    assert torch.equal(policy(obs_history), final), "the coarse model does not reach the action"
+    ((final - target) ** 2).mean().backward()
+    assert all(p.grad is None or not p.grad.any() for p in policy.coarse.parameters())
+    assert policy.policy_first[0].weight.grad.abs().sum() > 0
+
+
+def test_no_coarse_action_trains_without_the_coarse_loss(monkeypatch, capsys):
+    """The printed loss is MSE(final) alone; the coarse model keeps its initial weights."""
+    outputs = []
+    original = c2f.Table3Policy.coarse_and_final
+    monkeypatch.setattr(c2f.Table3Policy, "coarse_and_final", lambda self, obs_history: outputs.append(original(self, obs_history)) or outputs[-1])
+    built, make_policy = [], c2f.make_policy
+    monkeypatch.setattr(c2f, "make_policy", lambda *a: built.append(make_policy(*a)) or copy.deepcopy(built[-1]))
+    demos = fake_demos()
+    demos["actions"][:] = [0.5, -0.25, 0.1]
+    final_weights, lines = train(c2f, monkeypatch, capsys, demos=demos, epochs=1, coarse_action=False)
+    expected = ((outputs[-1][1] - torch.tensor([0.5, -0.25, 0.1])) ** 2).mean()
+    assert f"loss {expected.item():.5f} " in lines[-1]
+    initial = built[0].state_dict()
+    assert all(torch.equal(final_weights[name], initial[name]) == name.startswith(("coarse.", "normalize.")) for name in initial)
+
+
+def test_two_stage_without_the_coarse_action_is_refused(monkeypatch, capsys):
+    with pytest.raises(c2f.UsageError, match="--two-stage trains the coarse model first, --no-coarse-action never uses it"):
+        train(c2f, monkeypatch, capsys, two_stage=True, coarse_action=False)

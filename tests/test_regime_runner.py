@@ -6,8 +6,8 @@ import subprocess
 import pytest
 from conftest import REPO_ROOT
 
-from benchmark import regimes, run_grid
-from benchmark.paper import as_flags, paper_settings, setting_differences
+from benchmark import aggregate, regimes, run_grid
+from benchmark.paper import VARIANTS, as_flags, paper_settings, setting_differences
 from benchmark.results import UsageError, make_result, write_text
 
 
@@ -72,14 +72,28 @@ def test_a_map_is_made_by_one_commit(checkout, tmp_path):
     commit = regimes.scripts_commit(checkout)
     assert len(commit) == 40
     folder = tmp_path / "runs"
-    regimes.record_commit(folder, commit)
-    regimes.record_commit(folder, commit)  # the same commit again: fine
-    assert (folder / "commit.txt").read_text().strip() == commit
+    regimes.record_commit(folder, commit, "bc_so")
+    regimes.record_commit(folder, commit, "bc_so")  # the same commit again: fine
+    assert (folder / "bc_so" / "commit.txt").read_text().strip() == commit
     with pytest.raises(UsageError, match="run from a worktree of that commit"):
-        regimes.record_commit(folder, "f" * 40)
+        regimes.record_commit(folder, "f" * 40, "bc_so")
+    regimes.record_commit(folder, "f" * 40, "c2f_no_coarse")  # a method added later records its own commit
+    assert (folder / "c2f_no_coarse" / "commit.txt").read_text().strip() == "f" * 40
     (checkout / "bc_so.py").write_text('METHOD = "bc_so"\nchanged = 1\n')
     with pytest.raises(UsageError, match="uncommitted changes"):
         regimes.scripts_commit(checkout)
+
+
+def test_the_maps_first_methods_share_the_regimes_commit(tmp_path):
+    folder = tmp_path / "runs"
+    write_text(folder / "commit.txt", "a" * 40 + "\n")
+    (folder / "bc_oh").mkdir()
+    regimes.record_commit(folder, "a" * 40, "bc_oh")
+    assert not (folder / "bc_oh" / "commit.txt").exists()
+    with pytest.raises(UsageError, match=f"{folder / 'bc_oh'} holds runs made by commit aaaaaaaaaaaa"):
+        regimes.record_commit(folder, "b" * 40, "bc_oh")
+
+
 
 
 def test_the_regime_flags_reach_every_run(checkout, tmp_path, capsys):
@@ -90,3 +104,52 @@ def test_the_regime_flags_reach_every_run(checkout, tmp_path, capsys):
     runs = [line for line in out.splitlines() if line.startswith("run ")]
     assert len(runs) == 2 and all(line.endswith("--frame-skip 1 --hide-velocities)") for line in runs)
     assert str(tmp_path / "map" / "fs1_hidden" / "runs" / "bc_so" / "Hopper-v4") in runs[0]
+
+
+TABLE3 = ["c2f_output", "c2f_middle", "c2f_early", "c2f_penultimate", "c2f_feature", "c2f_coarse_history",
+          "c2f_coarse_history_policy_current", "c2f_no_stop_gradient", "c2f_two_stage", "c2f_no_coarse"]
+
+
+@pytest.mark.parametrize("variant", TABLE3)
+def test_every_table3_row_is_a_named_variant_whose_command_c2f_accepts(variant):
+    assert variant in run_grid.available_methods(REPO_ROOT)
+    command = run_grid.command(run_grid.Run(variant, "Hopper-v4", 1), options(methods=[variant]))
+    flags = command[command.index("--output-dir") + 2:-2]  # the variant's own flags, before --extra-args
+    assert flags == as_flags(VARIANTS[variant][1]) and flags
+    import c2f, tyro
+
+    parsed = tyro.cli(c2f.Args, args=flags)
+    assert {name: getattr(parsed, name) for name in VARIANTS[variant][1]} == VARIANTS[variant][1]
+
+
+def plant_c2f(results_dir, folder, **flags):
+    args = {"env": "Hopper-v4", "seeds": [1], **paper_settings("Hopper-v4"), **flags}
+    write_text(results_dir / folder / "Hopper-v4" / "result_seeds1.json",
+               json.dumps(make_result("Hopper-v4", "c2f", args, {1: [[1, 5.0], [2, 6.0], [3, 700.0]]})))
+
+
+@pytest.mark.parametrize("variant", TABLE3)
+def test_an_ablation_result_where_the_defaults_is_expected_is_neither_skipped_over_nor_aggregated(tmp_path, variant):
+    plant_c2f(tmp_path, "c2f", **VARIANTS[variant][1])  # e.g. c2f.py --fusion early --output-dir <runs>/c2f/Hopper-v4
+    run = run_grid.Run("c2f", "Hopper-v4", 1)
+    reason = run_grid.why_not_done(run, options(methods=["c2f"], extra_args=[], results_dir=tmp_path))
+    assert reason is not None and "was made with other settings" in reason
+    records, problems = aggregate.collect(tmp_path, allow_nonpaper=False)
+    assert records == [] and "not the paper's settings" in problems[0]
+
+
+def test_a_default_result_made_before_the_method_flags_existed_is_the_default(tmp_path):
+    plant_c2f(tmp_path, "c2f")  # no fusion, coarse_action, ... in its args
+    assert run_grid.why_not_done(run_grid.Run("c2f", "Hopper-v4", 1), options(methods=["c2f"], extra_args=[], results_dir=tmp_path)) is None
+    assert [r.method for r in aggregate.collect(tmp_path, allow_nonpaper=False)[0]] == ["c2f"]
+
+
+def test_a_grid_log_names_no_machine_path_and_records_the_machine(tmp_path):
+    checkout = tmp_path / "checkout"
+    (checkout / ".git").mkdir(parents=True)
+    results = checkout / "results" / "x" / "c2f" / "Hopper-v4"
+    shown = run_grid.shown_command(["/usr/bin/python3", "c2f.py", "--output-dir", str(results), "--demos", str(tmp_path / "d.npz")])
+    assert shown == ["c2f.py", "--output-dir", "results/x/c2f/Hopper-v4", "--demos", str(tmp_path / "d.npz")]
+    record = run_grid.machine()
+    assert set(record) >= {"cpu", "cpu_capability", "MKL_CBWR", "torch", "numpy", "mujoco", "gymnasium"}
+    assert record["torch"] == __import__("torch").__version__

@@ -89,7 +89,7 @@ def regime_map(tmp_path):
     plant(native, "bc_oh", "Walker2d-v4", 1, [80.0] * 3)
     plant(fs1, "bc_oh", "Hopper-v4", 1, [50.0] * 3, frame_skip=1)
     problems = [
-        f"left out {plant_variant(native, 'c2f_output', 'c2f', 'Hopper-v4', 2, [9.0] * 3)}: not the native_noise settings (fusion None != output)",
+        f"left out {plant_variant(native, 'c2f_output', 'c2f', 'Hopper-v4', 2, [9.0] * 3)}: not the native_noise settings (fusion late != output)",
         f"left out {plant(fs1, 'bc_oh', 'Hopper-v4', 2, [9.0] * 3)}: not the fs1_noise settings (frame_skip 4 != 1)",
         f"left out {result_path(fs1, 'bc_so', 'Hopper-v4', [3])}: unreadable JSON",
     ]
