@@ -454,7 +454,7 @@ def machine() -> dict:
     cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
     return {"cpu": cpu[1] if cpu else platform.processor(), "cpu_capability": torch.backends.cpu.get_cpu_capability(),
             "MKL_CBWR": os.environ.get("MKL_CBWR"), "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
-            "torch": torch.__version__, "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
+            "torch": str(torch.__version__), "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
 
 
 def write_atomically(path: str, write):

@@ -18,16 +18,16 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 """The repository root: the method scripts, experts/, scripts/ and tests/ live here."""
 
 
-def run_script(script, *args, cwd=None, timeout=120):
+def run_script(script, *args, cwd=None, timeout=120, env=None):
     """Run `python REPO_ROOT/script *args` and return the subprocess.CompletedProcess.
 
     stdout and stderr are captured as text (result.stdout, result.stderr); the exit code is not
     checked. cwd defaults to a fresh temporary directory, so relative default paths (runs/, experts/)
     never touch the repo; pass cwd=tmp_path to look at what the script wrote there. Warnings are
     silenced (PYTHONWARNINGS=ignore) so stderr holds only what the script itself prints.
-    Arguments may be str, int, float or Path.
+    Arguments may be str, int, float or Path; env holds more environment variables for the script.
     """
-    env = dict(os.environ, PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1")
+    env = dict(os.environ, PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1", **(env or {}))
     command = [sys.executable, str(REPO_ROOT / script), *map(str, args)]
     if cwd is not None:
         return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)

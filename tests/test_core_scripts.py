@@ -36,7 +36,8 @@ def check_result(result, workdir, method, seeds):
     path = workdir / "out" / method / f"result_seeds{'-'.join(map(str, seeds))}.json"
     assert f"result: out/{method}/{path.name}" in lines
     summary = json.loads(path.read_text())
-    assert set(summary) == {"env", "method", "args", "scores", "mean", "std"}
+    assert set(summary) == {"env", "method", "args", "scores", "mean", "std", "machine"}
+    assert summary["machine"]["torch"] == torch.__version__ and summary["machine"]["cpu_capability"], "where it was made"
     assert (summary["env"], summary["method"]) == ("Hopper-v4", method)
     assert summary["args"]["epochs"] == 2 and summary["args"]["learning_rate"] == 1e-5, "the paper's Hopper lr is filled in"
     scores = []

@@ -1,6 +1,7 @@
 """The shared setting of the copycat regime map (bc_oh.py holds the originals): the control rate
 (--frame-skip), positions-only observations (--hide-velocities), the copy-error line, demo caches per
 rate; and C2F's output fusion (--fusion output)."""
+import argparse
 import json
 
 import gymnasium as gym
@@ -166,7 +167,9 @@ def test_demos_of_another_rate_are_refused(tmp_path):
 
 
 def c2f_policy(**options):
-    return c2f.Policy(11, 3, 2, 32, torch.randn(50, 22), **options)
+    """The model c2f.py builds with these flags (Table3Policy off the paper's flags)."""
+    args = argparse.Namespace(history=2, hidden=32, **{**c2f.PAPER_FLAGS, **options})
+    return c2f.make_policy(args, 11, 3, torch.randn(50, 22))
 
 
 def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():
