@@ -1,0 +1,184 @@
+"""scripts/evaluate.py and scripts/watch.py: a model saved by any method file's --save-model, loaded by the
+script, plays exactly the episodes of its run's last evaluation; bad checkpoints are refused in one line;
+watch.py draws the policies side by side, one GIF frame per step (skipped where no OpenGL backend renders)."""
+import contextlib
+import json
+import os
+import re
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+import watch
+from conftest import REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
+
+BUDGET = ("--env", "Hopper-v4", "--seeds", 1, "--epochs", 2, "--eval-every", 1, "--eval-episodes", 2, "--num-demo-samples", 1000, "--save-model")
+EXTRA = {"dagger": ("--dagger-samples", 100, "--dagger-rounds", 2, "--dagger-epochs", 2)}
+METHODS = ["bc_so", "bc_oh", "c2f", "fca", "keyframe", "history_dropout", "average_ensemble", "dagger"]
+LAST_SEED = {method: 10_000 * 1 + 2 for method in METHODS}  # fit evaluates epoch E of training seed S with seed 10000 * S + E
+LAST_SEED["dagger"] = 10_000 * 1 + (2 + 2 * 2) + 2 * 2  # its final learner (epoch 2 + rounds * epochs) thrice, the third E=2 episodes on
+RETURN = re.compile(r"^episode (\d+) \| seed (\d+) \| return (\S+)$", re.M)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """method -> (its checkpoint seed1.pt, its JSON result): a tiny run of the method file, made once per module
+    (in this process: a second or two each; the runs share the demos cached in their cwd)."""
+    workdir, models = link_experts(tmp_path_factory.mktemp("saved_models")), {}
+
+    def model(method):
+        if method not in models:
+            with contextlib.chdir(workdir):
+                result = run_in_process(f"{method}.py", *BUDGET, *EXTRA.get(method, ()), "--output-dir", workdir / "out" / method)
+            assert result.returncode == 0, result.stderr
+            models[method] = workdir / "out" / method / "seed1.pt", json.loads((workdir / "out" / method / "result_seeds1.json").read_text())
+        return models[method]
+
+    return model
+
+
+def evaluate(*args):
+    """scripts/evaluate.py *args (in this process); returns (its result, the returns it printed, exactly)."""
+    result = run_in_process("scripts/evaluate.py", *args)
+    assert result.returncode == 0, result.stderr
+    return result, [float(value) for _, _, value in RETURN.findall(result.stdout)]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_saved_model_replays_its_runs_last_evaluation_exactly(trained, method):
+    path, summary = trained(method)
+    result, returns = evaluate(path, "--episodes", 2, "--seed", LAST_SEED[method])
+    assert [int(seed) for _, seed, _ in RETURN.findall(result.stdout)] == [LAST_SEED[method], LAST_SEED[method] + 1]
+    assert float(np.mean(returns)) == summary["scores"]["1"]["evaluations"][-1][1]  # bit for bit: same weights, normaliser, env, noise
+    assert result.stdout.splitlines()[-1] == f"Hopper-v4 {method}: {np.mean(returns):.1f} ± {np.std(returns):.1f} over 2 episodes"
+
+
+def test_dagger_s_final_score_is_three_evaluations_on_consecutive_episodes(trained):
+    path, summary = trained("dagger")
+    _, returns = evaluate(path, "--episodes", 6, "--seed", LAST_SEED["dagger"] - 4)
+    assert np.mean(returns) == pytest.approx(summary["scores"]["1"]["score"], rel=1e-12)
+
+
+def test_the_defaults_are_the_runs_episode_count_from_seed_0_and_the_settings_are_named(trained, tmp_path):
+    path, _ = trained("c2f")
+    hidden = torch.load(path, weights_only=True)
+    hidden["args"].update(hide_velocities=True, eval_episodes=3)
+    torch.save(hidden, tmp_path / "hidden.pt")
+    result, returns = evaluate(tmp_path / "hidden.pt")
+    assert [int(seed) for _, seed, _ in RETURN.findall(result.stdout)] == [0, 1, 2]
+    assert "c2f from" in result.stdout and "Hopper-v4, velocities hidden, frame skip 4, history 2: 3 episodes from --seed 0" in result.stdout
+    _, noisy = evaluate(path, "--episodes", 3)
+    assert returns != noisy  # the sensor the checkpoint records is the one evaluated
+
+
+def damaged(path, tmp_path):
+    (tmp_path / "damaged.pt").write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    return tmp_path / "damaged.pt"
+
+
+def edited(path, tmp_path, **changes):
+    checkpoint = torch.load(path, weights_only=True)
+    for key, value in changes.items():
+        if key in checkpoint:
+            checkpoint[key] = value
+        else:
+            checkpoint["args"][key] = value
+    torch.save(checkpoint, tmp_path / "edited.pt")
+    return tmp_path / "edited.pt"
+
+
+REFUSED = {
+    "damaged": (damaged, "damaged.pt is not a readable checkpoint (RuntimeError): the file is damaged"),
+    "missing method file": (lambda path, tmp: edited(path, tmp, method="gail"), "was saved by gail.py, which is not in"),
+    "an expert": (lambda path, tmp: REPO_ROOT / "experts" / "Hopper-v4.pt", "is not a model saved with --save-model: it has no 'method' (an expert"),
+    "a JSON result": (lambda path, tmp: path.with_name("result_seeds1.json"), "is not a readable checkpoint"),
+    "not found": (lambda path, tmp: tmp / "nowhere.pt", "not found: pass a seed<S>.pt that a method file wrote with --save-model"),
+    "other weights": (lambda path, tmp: edited(path, tmp, hidden=16), "its weights do not fit the bc_oh policy its args describe (size mismatch"),
+    "a newer file's setting": (lambda path, tmp: edited(path, tmp, warp_drive=True), "records the setting 'warp_drive', which this bc_oh.py does not have"),
+    "a method file's bad value": (lambda path, tmp: edited(path, tmp, env="Nope-v0"), "cannot make env 'Nope-v0'"),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_a_bad_checkpoint_is_refused_in_one_line(trained, tmp_path, case):
+    make, message = REFUSED[case]
+    result = run_in_process("scripts/evaluate.py", make(trained("bc_oh")[0], tmp_path))
+    assert result.returncode == 2
+    assert_usage_error(result, message)
+
+
+def test_the_command_refuses_a_damaged_checkpoint_with_exit_2_and_no_traceback(trained, tmp_path):
+    result = run_script("scripts/evaluate.py", damaged(trained("bc_oh")[0], tmp_path), "--seed", 3)
+    assert result.returncode == 2 and result.stdout == ""
+    assert_usage_error(result, "damaged.pt is not a readable checkpoint")
+
+
+# ---- scripts/watch.py ----
+
+
+@pytest.fixture(scope="module")
+def backend():
+    """A MUJOCO_GL value that renders here, or a skip saying what to install."""
+    found = watch.find_backend()
+    if found is None:
+        tried = f"MUJOCO_GL={os.environ['MUJOCO_GL']}" if os.environ.get("MUJOCO_GL") else "no OpenGL backend"
+        pytest.skip(f"{tried} renders no MuJoCo frame here: apt-get install libosmesa6 (OSMesa) or a GPU driver (EGL)")
+    return found
+
+
+def test_watch_draws_one_panel_per_policy_and_a_frame_per_step_and_plays_evaluates_episode(trained, backend, tmp_path, monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", backend)  # the script's subprocess probes only this one
+    (bc_oh, _), (c2f, _) = trained("bc_oh"), trained("c2f")
+    result = run_script("scripts/watch.py", bc_oh, c2f, "--output", tmp_path / "w.gif", "--seed", 5, "--max-steps", 30, "--every", 1,
+                        "--width", 64, "--height", 48)
+    assert result.returncode == 0, result.stderr
+    panels = re.findall(r"^(\w+): return (\S+) over (\d+) steps( \(episode ended\))?$", result.stdout, re.M)
+    assert [name for name, *_ in panels] == ["bc_oh", "c2f"]
+    steps = max(int(count) for _, _, count, _ in panels)
+    assert steps <= 30 and (steps == 30 or all(ended for *_, ended in panels))
+    with Image.open(tmp_path / "w.gif") as gif:
+        assert (gif.n_frames, gif.size) == (steps + 1, (2 * 64, 48))  # the start, then every step; two panels side by side
+        gif.seek(steps)
+        last = np.asarray(gif.convert("RGB"))
+    assert not np.array_equal(last[:, :64], last[:, 64:])
+    for (name, value, _, ended), path in zip(panels, (bc_oh, c2f)):
+        if ended:  # a whole episode: the one `evaluate.py --episodes 1 --seed 5` plays, to the last digit
+            assert float(value) == evaluate(path, "--episodes", 1, "--seed", 5)[1][0]
+    assert any(ended for *_, ended in panels), "expected the tiny BC-OH policy to fall within 30 steps"
+
+
+def test_watch_frames_follow_every_and_play_in_real_time(trained, backend, tmp_path, monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", backend)
+    result = run_script("scripts/watch.py", trained("c2f")[0], "--output", tmp_path / "w.gif", "--max-steps", 12, "--width", 32, "--height", 24)
+    assert result.returncode == 0, result.stderr
+    with Image.open(tmp_path / "w.gif") as gif:  # Hopper: 0.008 s a step, so by default a frame every 5 steps, 40 ms
+        assert (gif.n_frames, gif.size, gif.info["duration"]) == (1 + 2 + 1, (32, 24), 40)  # steps 0, 5, 10 and the last, 12
+
+
+def test_watch_names_what_to_install_where_no_backend_renders(monkeypatch):
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    monkeypatch.setattr(watch, "renders", lambda backend: False)
+    with pytest.raises(watch.UsageError, match=r"tried MUJOCO_GL=egl and osmesa\): install OSMesa \(apt-get install libosmesa6\)"):
+        watch.use_backend()
+
+
+WATCH_REFUSED = {
+    "not a gif": (lambda path, tmp: [path, "--output", tmp / "w.mp4"], "", "is not a .gif"),
+    "two envs": (lambda path, tmp: [path, edited(path, tmp, env="Hopper-v5"), "--output", tmp / "w.gif"], "",
+                 "is a policy for Hopper-v4 at frame skip 4"),
+    "a bad checkpoint": (lambda path, tmp: [tmp / "nowhere.pt", "--output", tmp / "w.gif"], "", "nowhere.pt not found"),
+    "a backend that cannot render": (lambda path, tmp: [path, "--output", tmp / "w.gif"], "bogus", "cannot render with MUJOCO_GL=bogus"),
+}
+
+
+@pytest.mark.parametrize("case", list(WATCH_REFUSED))
+def test_watch_refuses_bad_input_in_one_line(trained, tmp_path, monkeypatch, case):
+    make, gl, message = WATCH_REFUSED[case]
+    if gl:
+        monkeypatch.setenv("MUJOCO_GL", gl)
+    result = run_in_process("scripts/watch.py", *make(trained("bc_oh")[0], tmp_path))
+    assert result.returncode == 2
+    assert_usage_error(result, message)
+    assert not (tmp_path / "w.gif").exists()
