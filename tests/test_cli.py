@@ -31,7 +31,7 @@ def test_a_bad_command_line_exits_2_naming_the_flag(script, case):
 
 @pytest.mark.parametrize("args, message", [
     (["--epochs", "abc"], "--epochs"),
-    (["--fusion", "sideways"], "invalid choice 'sideways' for argument '--fusion'. Expected one of ('late', 'output', 'middle', 'early')"),
+    (["--fusion", "sideways"], "invalid choice 'sideways' for argument '--fusion'. Expected one of ('late', 'output', 'middle', 'early', 'penultimate')"),
     (["--seeds", "1", "two"], "--seeds"),
 ])
 def test_a_bad_flag_value_names_the_flag(args, message):
