@@ -262,7 +262,11 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
     if not os.path.isfile(path) and args.demos:
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
-        raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
+        raise UsageError(f"no expert for {args.env} at {os.path.abspath(expert_path)} (--expert is relative to the working directory, and the "
+                         "repository's experts are in its experts/ folder): run from the repository root, pass --expert PATH or --demos")
+    recorded_env = demo_meta(path).get("env_id")
+    if recorded_env and recorded_env != args.env:
+        raise UsageError(f"{path} holds demos of {recorded_env}, not {args.env}: pass --env {recorded_env}, or demos of {args.env}")
     recorded_rate = demo_meta(path).get("frame_skip", native)  # a file without the record was made at the native rate
     if recorded_rate != frame_skip:
         raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
@@ -272,12 +276,18 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
             missing = [key for key in meaning if key not in data]
             demos = {key: data[key] for key in meaning if key in data}
     except Exception as error:
-        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
+        fix = "delete it to regenerate" if args.demos is None else "save the arrays with np.savez, as plain numeric arrays"
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}: {error}): see the .npz format in README.md, or {fix}")
     if missing:
         raise UsageError(f"{path} has no {missing[0]!r} array ({meaning[missing[0]]}): see the .npz format in README.md")
     n = len(demos["actions"]) if demos["actions"].ndim else 0
     if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
         raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
+    if args.demos and args.num_demo_samples:  # the Minari import's rule: the first N steps
+        if args.num_demo_samples > n:
+            raise UsageError(f"--num-demo-samples {args.num_demo_samples}, but {path} holds {n} steps: pass at most {n}, or leave it out for all")
+        print(f"--num-demo-samples {args.num_demo_samples}: the first {args.num_demo_samples} of the {n} steps in {path}")
+        demos, n = {key: value[:args.num_demo_samples] for key, value in demos.items()}, args.num_demo_samples
     if n <= args.batch_size:
         raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
     for key, dtype in (("observations", np.float64), ("actions", np.float32)):  # any real dtype converts
@@ -287,8 +297,16 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         bad = np.argwhere(~np.isfinite(demos[key]))
         if len(bad):
             raise UsageError(f"{path}: {key} has the non-finite value {demos[key][tuple(bad[0])]} at row {bad[0][0]}, column {bad[0][1]}: fix or drop that step")
+    low, high = env.action_space.low, env.action_space.high
+    outside = np.argwhere((demos["actions"] < low) | (demos["actions"] > high))
+    if len(outside):
+        row, column = outside[0]
+        raise UsageError(f"{path}: actions[{row}, {column}] = {demos['actions'][row, column]:g} lies outside {args.env}'s bounds "
+                         f"[{low[column]:g}, {high[column]:g}]: clip or rescale the actions to the env's action space")
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
-    demos["episode_starts"][0] = True
+    if not demos["episode_starts"][0]:
+        raise UsageError(f"{path}: episode_starts[0] is False, but the first step starts an episode: episode_starts is True on each "
+                         "episode's first step (done flags, True on the last step, shifted by one give this: use [True] + dones[:-1])")
     print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
           "(near 0 means copying the last action is a shortcut)")
     return demos

@@ -298,10 +298,7 @@ def retargeted_expert(path: str, env_id: str):
     """--retarget: (the expert at path, the env it was made for), refused unless that env is another version of
     env_id's (Hopper-v4 for Hopper-v5) with the same action shape and the same observation, or one that is the
     leading positions and velocities of env_id's (Ant-v4's 27 entries of Ant-v5's 105, before its contact forces)."""
-    try:
-        made_for = torch.load(path, map_location="cpu", weights_only=True)["env_id"]
-    except Exception:
-        made_for = env_id  # load_expert says what is wrong with the file
+    made_for = checkpoint_env(path) or env_id  # an unreadable file: load_expert says what is wrong with it
     policy, env = load_expert(path, made_for), make_env(env_id)
     structure = getattr(env.unwrapped, "observation_structure", {})
     observations = (env.observation_space.shape[0], structure.get("qpos", 0) + structure.get("qvel", 0))
@@ -311,6 +308,14 @@ def retargeted_expert(path: str, env_id: str):
     return policy, made_for
 
 
+def checkpoint_env(path: str) -> Optional[str]:
+    """The env a checkpoint was made for, or None when the file does not read as one (load_expert then says why)."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
+    except Exception:
+        return None
+
+
 def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
     native = env_frame_skip(args.env)
@@ -318,6 +323,10 @@ def eval_only(args: Args):
         env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.eval_episodes <= 0:
         raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
+    recorded = checkpoint_env(path)
+    if not args.retarget and recorded not in (None, args.env) and recorded.split("-")[0] == args.env.split("-")[0]:
+        raise UsageError(f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} "
+                         f"(and --ship-to to ship it there), or a checkpoint made for {args.env}")
     # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
     policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)

@@ -33,15 +33,15 @@ class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: Optional[int] = None
-    """simulator steps per action (default: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant); episodes and rewards are rescaled to the same simulated time and return scale"""
+    """simulator steps per action; None: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant (episodes and rewards are rescaled to the same simulated time and return scale)"""
     seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
-    """training seeds, run one after another; the score is mean ± std over them"""
+    """training seeds, run one after another; each seed's result is written when it ends, and a rerun keeps the seeds already done with the same settings; the score is mean ± std over them"""
     demos: Optional[str] = None
-    """demonstrations (.npz, format in README); default: roll out the expert once and cache under demos/"""
+    """demonstrations (.npz, format in README); None: roll out the expert once and cache under demos/"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint used to generate demonstrations when --demos is not given"""
     num_demo_samples: Optional[int] = None
-    """demonstration steps to generate (default as in the paper: 20000 for Hopper, 10000 otherwise)"""
+    """demonstration steps: how many to generate, or with --demos the first N of the file; None: the paper's 20000 for Hopper and 10000 otherwise (with --demos: all)"""
     obs_noise_std: float = 0.2
     """std of the Gaussian noise on the velocity entries of every observation (partial observability)"""
     hide_velocities: bool = False
@@ -51,19 +51,19 @@ class Args:
     history: int = 2
     """frames in the observation history [o_{t-H+1}, ..., o_t]"""
     epochs: int = 1000
-    """passes over the demonstrations (one epoch = num-samples / batch-size steps)"""
+    """training length: one epoch is num-samples / batch-size minibatch steps, each minibatch drawn at random with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: Optional[float] = None
-    """Adam learning rate, decayed linearly to zero (default: 1e-5 for Hopper, 1e-4 otherwise, as in the paper)"""
+    """Adam learning rate, decayed linearly to zero; None: the paper's, 1e-5 for Hopper and 1e-4 otherwise"""
     hidden: int = 256
     """width of the hidden layers of every three-layer MLP"""
     eval_every: int = 100
     """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
     eval_episodes: int = 10
     """episodes per evaluation, run in parallel on the partially observed env with the deterministic policy"""
-    output_dir: str = "runs/{method}/{env}"
-    """where the JSON result (and with --save-model the checkpoints) are written"""
+    output_dir: str = "runs/{run_name}/{env}"
+    """where the JSON results (and with --save-model the checkpoints) go; {run_name} is the method ({method}) plus each flag given a non-default value (e.g. c2f__fusion-early), so runs of other settings never overwrite each other's results"""
     save_model: bool = False
     """write a self-contained checkpoint per seed (weights, normalisation, args)"""
     cuda: bool = False
@@ -168,7 +168,8 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
-            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            later_seeds = len(args.seeds) - 1 - args.seeds.index(seed) if seed in args.seeds else 0
+            eta = (time.time() - start) / epoch * (args.epochs - epoch + later_seeds * args.epochs) / 60  # for the whole run
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
                   f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
@@ -212,38 +213,94 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 # Copied from bc_oh.run
 def run(args):
-    """Check the input, get the demos, train every seed, report and write the JSON result."""
+    """Check the input, get the demos, train every seed (writing its result when it ends), report."""
     check_common_args(args)
+    name = run_name(args)  # before the defaults are filled in: it names what the user changed
     env = make_env(args.env)
     velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
     args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded in results and checkpoints
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
-    device = torch.device("cuda" if args.cuda and torch.cuda.is_available() else "cpu")
+    device = torch.device("cuda" if args.cuda else "cpu")
     torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
     demos = load_or_generate_demos(args, env)
-    output_dir = args.output_dir.format(method=METHOD, env=args.env)
-    scores, per_seed = [], {}
+    output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
+    per_seed = {}
     for seed in args.seeds:
+        seed_path = os.path.join(output_dir, f"result_seeds{seed}.json")
+        per_seed[seed] = finished_seed(seed_path, args)
+        if per_seed[seed]:
+            print(f"seed {seed}: kept its finished result {seed_path}, made with these settings (delete it to train the seed again)")
+            continue
         result = train_seed(args, demos, seed, device)
         score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
-        scores.append(score)
         per_seed[seed] = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
         if args.save_model:
             checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
                           "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
             write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
+        write_result(seed_path, args, output_dir, {seed: per_seed[seed]})  # now: an interrupted run keeps this seed
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    recorded = {**asdict(args), "output_dir": os.path.relpath(output_dir)}  # relative: a result does not name the machine
-    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)), "std": float(np.std(scores)),
-               "machine": machine()}
-    write_atomically(result_path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
+    write_result(result_path, args, output_dir, per_seed)
     print(f"\n{'seed':>6} | {'score':>8}")
-    for seed, score in zip(args.seeds, scores):
-        print(f"{seed:>6} | {score:8.1f}")
+    for seed, entry in per_seed.items():
+        print(f"{seed:>6} | {entry['score']:8.1f}")
     print(f"result: {result_path}")
-    print(f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{'s' * (len(scores) > 1)}")
+    print(summary_line(args, [entry["score"] for entry in per_seed.values()]))
+
+
+# Copied from bc_oh.run_name
+def run_name(args) -> str:
+    """{run_name} in --output-dir: METHOD, then every flag given a value other than its default
+    (e.g. c2f__fusion-early__no-stop-gradient), so runs of other settings never overwrite each other's results.
+    Flags that change no result (seeds, where results go, the device) are left out."""
+    defaults, changed = type(args)(), []
+    for name, value in asdict(args).items():
+        if name in ("seeds", "output_dir", "save_model", "cuda", "cuda_graph") or value == getattr(defaults, name):
+            continue
+        flag = name.replace("_", "-")
+        text = "-".join(map(str, value)) if isinstance(value, list) else os.path.basename(str(value)).removesuffix(".npz").removesuffix(".pt")
+        changed.append(flag if value is True else f"no-{flag}" if value is False else f"{flag}-{text}")
+    return "__".join([METHOD, *changed])
+
+
+# Copied from bc_oh.finished_seed
+def finished_seed(path: str, args) -> Optional[dict]:
+    """The entry of the one seed in the result at path, if an earlier run wrote it with these same settings (and
+    with --save-model, its model): a rerun of an interrupted command trains only the seeds it had not finished."""
+    ignored = ("seeds", "output_dir", "cuda", "cuda_graph", "save_model")
+    try:
+        with open(path) as file:
+            result = json.load(file)
+        (entry,) = result["scores"].values()
+        recorded = {name: value for name, value in result["args"].items() if name not in ignored}
+    except Exception:  # none yet, or not one of ours: train the seed
+        return None
+    same = recorded == {name: value for name, value in asdict(args).items() if name not in ignored}
+    model_kept = not args.save_model or os.path.isfile(os.path.join(os.path.dirname(path), f"seed{result['args']['seeds'][0]}.pt"))
+    return entry if same and model_kept else None
+
+
+# Copied from bc_oh.write_result
+def write_result(path: str, args, output_dir: str, per_seed: dict, **more):
+    """Write the JSON result of the seeds in per_seed (atomically), with their mean and std and where it was made."""
+    scores = [entry["score"] for entry in per_seed.values()]
+    recorded = {**asdict(args), "seeds": list(per_seed), "output_dir": os.path.relpath(output_dir)}  # relative: no machine named
+    summary = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed, "mean": float(np.mean(scores)),
+               "std": float(np.std(scores)), **more, "machine": machine()}
+    write_atomically(path, lambda file: file.write(json.dumps(summary, indent=1).encode()))
+
+
+# Copied from bc_oh.summary_line
+def summary_line(args, scores: list) -> str:
+    """Mean ± std over the seeds, and its share of the shipped expert's return (recorded by expert_ppo.py --ship-to)."""
+    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{'s' * (len(scores) > 1)}"
+    try:
+        expert = float(torch.load(args.expert.format(env=args.env), map_location="cpu", weights_only=True)["eval_return"])
+    except Exception:  # no expert file (own demos), or one without a recorded return: no share to give
+        return line
+    return f"{line}, {np.mean(scores) / expert:.0%} of the expert's {expert:.0f}"
 
 
 # Copied from bc_oh.UsageError
@@ -263,6 +320,8 @@ def check_common_args(args):
         raise UsageError("--seeds needs at least one seed: e.g. --seeds 1 2 3")
     if args.num_demo_samples is not None and args.num_demo_samples <= args.batch_size:
         raise UsageError(f"--num-demo-samples must exceed --batch-size ({args.batch_size}), got {args.num_demo_samples}: pass more samples or a smaller batch")
+    if args.cuda and not torch.cuda.is_available():
+        raise UsageError("--cuda, but torch sees no CUDA GPU here (torch.cuda.is_available() is False): drop --cuda to train on the CPU")
 
 
 # Copied from bc_oh.velocity_dims
@@ -414,7 +473,11 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
     if not os.path.isfile(path) and args.demos:
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
-        raise UsageError(f"no expert for {args.env} at {expert_path}: train one with `python expert_ppo.py --env {args.env}`, or pass --demos")
+        raise UsageError(f"no expert for {args.env} at {os.path.abspath(expert_path)} (--expert is relative to the working directory, and the "
+                         "repository's experts are in its experts/ folder): run from the repository root, pass --expert PATH or --demos")
+    recorded_env = demo_meta(path).get("env_id")
+    if recorded_env and recorded_env != args.env:
+        raise UsageError(f"{path} holds demos of {recorded_env}, not {args.env}: pass --env {recorded_env}, or demos of {args.env}")
     recorded_rate = demo_meta(path).get("frame_skip", native)  # a file without the record was made at the native rate
     if recorded_rate != frame_skip:
         raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
@@ -424,12 +487,18 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
             missing = [key for key in meaning if key not in data]
             demos = {key: data[key] for key in meaning if key in data}
     except Exception as error:
-        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the .npz format in README.md, or delete it to regenerate")
+        fix = "delete it to regenerate" if args.demos is None else "save the arrays with np.savez, as plain numeric arrays"
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}: {error}): see the .npz format in README.md, or {fix}")
     if missing:
         raise UsageError(f"{path} has no {missing[0]!r} array ({meaning[missing[0]]}): see the .npz format in README.md")
     n = len(demos["actions"]) if demos["actions"].ndim else 0
     if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
         raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
+    if args.demos and args.num_demo_samples:  # the Minari import's rule: the first N steps
+        if args.num_demo_samples > n:
+            raise UsageError(f"--num-demo-samples {args.num_demo_samples}, but {path} holds {n} steps: pass at most {n}, or leave it out for all")
+        print(f"--num-demo-samples {args.num_demo_samples}: the first {args.num_demo_samples} of the {n} steps in {path}")
+        demos, n = {key: value[:args.num_demo_samples] for key, value in demos.items()}, args.num_demo_samples
     if n <= args.batch_size:
         raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
     for key, dtype in (("observations", np.float64), ("actions", np.float32)):  # any real dtype converts
@@ -439,8 +508,16 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         bad = np.argwhere(~np.isfinite(demos[key]))
         if len(bad):
             raise UsageError(f"{path}: {key} has the non-finite value {demos[key][tuple(bad[0])]} at row {bad[0][0]}, column {bad[0][1]}: fix or drop that step")
+    low, high = env.action_space.low, env.action_space.high
+    outside = np.argwhere((demos["actions"] < low) | (demos["actions"] > high))
+    if len(outside):
+        row, column = outside[0]
+        raise UsageError(f"{path}: actions[{row}, {column}] = {demos['actions'][row, column]:g} lies outside {args.env}'s bounds "
+                         f"[{low[column]:g}, {high[column]:g}]: clip or rescale the actions to the env's action space")
     demos["episode_starts"] = demos["episode_starts"].astype(bool)
-    demos["episode_starts"][0] = True
+    if not demos["episode_starts"][0]:
+        raise UsageError(f"{path}: episode_starts[0] is False, but the first step starts an episode: episode_starts is True on each "
+                         "episode's first step (done flags, True on the last step, shifted by one give this: use [True] + dones[:-1])")
     print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
           "(near 0 means copying the last action is a shortcut)")
     return demos

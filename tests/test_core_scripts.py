@@ -12,7 +12,7 @@ import torch
 import c2f
 from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
 
-SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds?$")
+SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds?, (\d+)% of the expert's (\d+)$")
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,8 @@ BAD_INPUTS = {
     "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
     "history 0": (["--history", 0], "--history must be positive, got 0: "),
     "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1: "),
-    "no expert": ([], "no expert for Hopper-v4 at experts/Hopper-v4.pt: train one with `python expert_ppo.py --env Hopper-v4"),
+    "no expert": ([], "no expert for Hopper-v4 at {cwd}/experts/Hopper-v4.pt (--expert is relative to the working directory, and the "
+                      "repository's experts are in its experts/ folder): run from the repository root"),
     "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found: "),
     "corrupt demos": (["--demos", "corrupt.npz"], "corrupt.npz is not a readable demo file ("),
     "wrong observation size": (["--demos", "obs5.npz"], "obs5.npz holds observations (200, 5) and actions (200, 3), but Hopper-v4 needs (N, 11) and (N, 3): "),
@@ -105,6 +106,7 @@ def test_bad_input_gives_one_line_and_exit_2(case, script, tmp_path, monkeypatch
     (tmp_path / "corrupt.npz").write_bytes((tmp_path / "obs5.npz").read_bytes()[:3000])  # a cut-off download
     np.savez(tmp_path / "act2.npz", **fake_demos(200, act_dim=2))
     args, message = BAD_INPUTS[case]
+    message = message.format(cwd=tmp_path)
     result = run_in_process(script, *args, "--epochs", 1, "--eval-episodes", 1, "--seeds", 1)  # short, should it train
     assert_usage_error(result, message)
     assert result.returncode == 2 and result.stdout == "", "rejected before anything else happens"

@@ -1,0 +1,174 @@
+"""A command line a user can trust with their own runs and data: ordinary mistakes end in one line and exit 2
+(never a silently wrong run), a run never overwrites another run's result, each seed's result is written when the
+seed ends and a rerun keeps it, and the summary line says how good the score is."""
+import json
+
+import numpy as np
+import pytest
+import torch
+from conftest import assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
+
+import bc_oh
+import c2f
+import dagger
+
+SCRIPTS = ["bc_oh.py", "c2f.py", "dagger.py", "average_ensemble.py"]
+
+
+def save_demos(path, demos, meta=None):
+    np.savez(path, **demos, **({"meta": np.array(json.dumps(meta))} if meta else {}))
+    return path
+
+
+def bad_demos(tmp_path):
+    """Demo files of the mistakes users make; each file is Hopper-shaped, so only the new checks can catch it."""
+    demos = fake_demos(200)
+    save_demos(tmp_path / "walker.npz", demos, {"env_id": "Walker2d-v4", "frame_skip": 4})
+    save_demos(tmp_path / "v4.npz", demos, {"env_id": "Hopper-v4", "frame_skip": 4})
+    save_demos(tmp_path / "scaled.npz", {**demos, "actions": demos["actions"] * 5})
+    save_demos(tmp_path / "dones.npz", {**demos, "episode_starts": np.roll(demos["episode_starts"], -1)})  # done flags, not starts
+    np.savez(tmp_path / "objects.npz", observations=np.array([None] * 200, dtype=object), actions=demos["actions"],
+             episode_starts=demos["episode_starts"])
+
+
+CASES = {
+    "another env's demos": (["--demos", "walker.npz"], "walker.npz holds demos of Walker2d-v4, not Hopper-v4: pass --env Walker2d-v4, or demos of Hopper-v4"),
+    "another version's demos": (["--env", "Hopper-v5", "--demos", "v4.npz"], "v4.npz holds demos of Hopper-v4, not Hopper-v5: "),
+    "actions out of bounds": (["--demos", "scaled.npz"], "scaled.npz: actions[0, 0] = "),
+    "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False, but the first step starts an episode: "),
+    "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError: Object arrays cannot be loaded "
+                                                  "when allow_pickle=False): see the .npz format in README.md, or save the arrays with np.savez"),
+    "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "--num-demo-samples 500, but v4.npz holds 200 steps: pass at most 200"),
+}
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+@pytest.mark.parametrize("case", CASES)
+def test_a_mistake_in_the_demos_is_refused_in_one_line(case, script, tmp_path, monkeypatch):
+    monkeypatch.chdir(link_experts(tmp_path))  # DAgger's expert labels its rounds
+    bad_demos(tmp_path)
+    args, message = CASES[case]
+    result = run_in_process(script, *args, "--epochs", 1, "--eval-episodes", 1, "--seeds", 1)
+    assert_usage_error(result, message)
+
+
+def test_actions_out_of_bounds_name_their_row_column_and_bounds(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    demos = fake_demos(200)
+    demos["actions"][:] = 0.5
+    demos["actions"][7, 2] = 1.25
+    save_demos(tmp_path / "one.npz", demos)
+    result = run_in_process("bc_oh.py", "--demos", "one.npz", "--epochs", 1, "--seeds", 1)
+    assert_usage_error(result, "one.npz: actions[7, 2] = 1.25 lies outside Hopper-v4's bounds [-1, 1]: clip or rescale")
+
+
+def test_a_users_unreadable_file_gets_numpys_reason_and_no_advice_to_delete_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.npz").write_bytes(b"not a zip")
+    result = run_in_process("bc_oh.py", "--demos", "mine.npz", "--epochs", 1, "--seeds", 1)
+    assert_usage_error(result, "mine.npz is not a readable demo file (ValueError: This file contains pickled (object) data. ")
+    assert "save the arrays with np.savez" in result.stderr and "delete it" not in result.stderr
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the refusal on a machine without a GPU")
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_cuda_without_a_gpu_is_refused(script, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process(script, "--cuda", "--epochs", 1, "--seeds", 1)
+    assert_usage_error(result, "--cuda, but torch sees no CUDA GPU here (torch.cuda.is_available() is False): drop --cuda to train on the CPU")
+
+
+def test_num_demo_samples_with_demos_takes_the_first_steps_and_says_so(tmp_path, monkeypatch):
+    demos = fake_demos(300)
+    save_demos(tmp_path / "d.npz", demos)
+    args = tiny_args(bc_oh, demos=str(tmp_path / "d.npz"), num_demo_samples=120)
+    monkeypatch.chdir(tmp_path)
+    taken = bc_oh.load_or_generate_demos(args, bc_oh.make_env("Hopper-v4"))
+    assert len(taken["actions"]) == 120 and np.array_equal(taken["observations"], demos["observations"][:120])
+
+
+def test_num_demo_samples_with_demos_is_printed(tmp_path, monkeypatch, capsys):
+    save_demos(tmp_path / "d.npz", fake_demos(300))
+    monkeypatch.chdir(tmp_path)
+    bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos="d.npz", num_demo_samples=120), bc_oh.make_env("Hopper-v4"))
+    out = capsys.readouterr().out
+    assert "--num-demo-samples 120: the first 120 of the 300 steps in d.npz" in out and "demos: 120 steps from d.npz" in out
+
+
+def test_a_file_without_meta_still_loads(tmp_path, monkeypatch):
+    save_demos(tmp_path / "d.npz", fake_demos(200))
+    monkeypatch.chdir(tmp_path)
+    assert len(bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos="d.npz"), bc_oh.make_env("Hopper-v4"))["actions"]) == 200
+
+
+# ----------------------------------------------------------------------------------------------
+# Where results go, and what survives an interruption
+
+
+def test_each_run_of_other_settings_gets_a_folder_its_flags_name():
+    assert c2f.run_name(c2f.Args()) == "c2f"
+    assert c2f.run_name(c2f.Args(fusion="early", stop_gradient=False)) == "c2f__fusion-early__no-stop-gradient"
+    assert c2f.run_name(c2f.Args(seeds=[4, 5], cuda=True, save_model=True, output_dir="x")) == "c2f", "no result changes"
+    assert bc_oh.run_name(bc_oh.Args(demos="data/my_demos.npz", hide_velocities=True, learning_rate=1e-4)) == \
+        "bc_oh__demos-my_demos__hide-velocities__learning-rate-0.0001"
+    assert bc_oh.Args().output_dir == "runs/{run_name}/{env}"
+
+
+def run_in(folder, module, monkeypatch, **overrides):
+    """module.run on tiny fake demos in folder (no env rollouts); returns the seeds it trained."""
+    save_demos(folder / "d.npz", fake_demos(256))
+    monkeypatch.chdir(folder if (folder / "experts").exists() else link_experts(folder))  # DAgger's expert labels its rounds
+    skip_evaluation(monkeypatch, module, score=7.0)
+    trained, train_seed = [], module.train_seed
+    monkeypatch.setattr(module, "train_seed", lambda args, demos, seed, device: trained.append(seed) or train_seed(args, demos, seed, device))
+    args = tiny_args(module, demos="d.npz", learning_rate=None, **overrides)
+    module.run(args)
+    return trained
+
+
+def test_an_ablation_does_not_overwrite_the_default_run(tmp_path, monkeypatch):
+    run_in(tmp_path, c2f, monkeypatch)
+    run_in(tmp_path, c2f, monkeypatch, fusion="early")
+    folders = sorted(path.parent.parent.name for path in (tmp_path / "runs").glob("*/Hopper-v4/result_seeds1.json"))
+    assert len(folders) == 2 and folders[1] == folders[0] + "__fusion-early"
+
+
+@pytest.mark.parametrize("module", [bc_oh, dagger], ids=lambda module: module.METHOD)
+def test_each_seed_is_written_when_it_ends_and_a_rerun_keeps_it(tmp_path, monkeypatch, capsys, module):
+    def interrupted(args, demos, seed, device):
+        if seed == 2:
+            raise KeyboardInterrupt  # Ctrl-C during the second seed
+        return train_seed(args, demos, seed, device)
+
+    train_seed = module.train_seed
+    monkeypatch.setattr(module, "train_seed", interrupted)
+    skip_evaluation(monkeypatch, module, score=7.0)
+    save_demos(tmp_path / "d.npz", fake_demos(256))
+    monkeypatch.chdir(link_experts(tmp_path))
+    extra = dict(dagger_samples=40, dagger_rounds=1, dagger_epochs=1) if module is dagger else {}
+    with pytest.raises(KeyboardInterrupt):
+        module.run(tiny_args(module, demos="d.npz", learning_rate=None, seeds=[1, 2], **extra))
+    (folder,) = (tmp_path / "runs").glob("*/Hopper-v4")
+    assert sorted(path.name for path in folder.glob("*.json")) == ["result_seeds1.json"], "seed 1 is kept, no combined result yet"
+    first = json.loads((folder / "result_seeds1.json").read_text())
+    assert first["args"]["seeds"] == [1] and list(first["scores"]) == ["1"]
+    monkeypatch.setattr(module, "train_seed", train_seed)
+    assert run_in(tmp_path, module, monkeypatch, seeds=[1, 2], **extra) == [2], "the rerun trains only the unfinished seed"
+    assert f"seed 1: kept its finished result {folder.relative_to(tmp_path)}/result_seeds1.json" in capsys.readouterr().out
+    both = json.loads((folder / "result_seeds1-2.json").read_text())
+    assert both["scores"]["1"] == first["scores"]["1"] and list(both["scores"]) == ["1", "2"]
+
+
+def test_a_seed_made_with_other_settings_is_trained_again(tmp_path, monkeypatch):
+    run_in(tmp_path, bc_oh, monkeypatch, output_dir="out")
+    assert run_in(tmp_path, bc_oh, monkeypatch, output_dir="out") == []
+    assert run_in(tmp_path, bc_oh, monkeypatch, output_dir="out", hidden=16) == [1], "same folder, other settings: trained again"
+
+
+def test_the_summary_line_gives_the_share_of_the_experts_return(tmp_path, monkeypatch):
+    args = tiny_args(bc_oh)
+    monkeypatch.chdir(link_experts(tmp_path))
+    expert = torch.load("experts/Hopper-v4.pt", weights_only=True)["eval_return"]
+    assert bc_oh.summary_line(args, [expert * 0.4, expert * 0.42]) == \
+        f"Hopper-v4 bc_oh: {expert * 0.41:.1f} ± {expert * 0.01:.1f} over 2 seeds, 41% of the expert's {expert:.0f}"
+    assert bc_oh.summary_line(tiny_args(bc_oh, expert="none.pt"), [1.0]) == "Hopper-v4 bc_oh: 1.0 ± 0.0 over 1 seed"
