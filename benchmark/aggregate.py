@@ -1,12 +1,13 @@
 """Turn the per-run results of benchmark.run_grid into the Table 2 files, ours beside the paper's.
 
-    python -m benchmark.aggregate [--results-dir results/runs] [--out results] [--allow-nonpaper]
+    python -m benchmark.aggregate [--results-dir results/runs] [--out results] [--allow-nonpaper] [--page [docs/results.md]]
 
 Reads every <results-dir>/<method>/<env>/result_seeds*.json and writes
 - <out>/mujoco.csv: env,method,seed,score, score = mean return of the seed's last three evaluations;
 - <out>/table2.md: mean ± std over seeds per method and env, the paper's number beside it, seeds per cell;
 - <out>/table2.png: the same as bars with error bars, paper beside ours, one panel per env;
-- <out>/curves.png: each method's evaluation return against epoch (mean over seeds, min-max band), one panel per env.
+- <out>/curves.png: each method's evaluation return against epoch (mean over seeds, min-max band), one panel per env;
+- with --page, the table and both pictures between the <!-- table2 --> markers of docs/results.md (or the page named).
 Corrupt or partial results, and runs at settings other than the paper's (unless --allow-nonpaper), are
 reported on stderr, naming the file, and left out.
 """
@@ -118,17 +119,18 @@ def settings_text() -> str:
                      for name in hopper)
 
 
-def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, readme=None) -> str:
+def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, page=None) -> str:
     methods, envs, ours = build_table(records)
     lines = [
         "# Table 2: imitation on MuJoCo with noisy velocities, ours beside the paper's",
         "",
         f"Made by `python -m benchmark.aggregate --results-dir {results_dir} --out {out}"
-        + (" --allow-nonpaper" if allow_nonpaper else "") + (f" --readme {readme}" if readme else "") + f"` from {len(records)} per-seed results, made by "
+        + (" --allow-nonpaper" if allow_nonpaper else "") + (f" --page {page}" if page else "") + f"` from {len(records)} per-seed results, made by "
         "`python -m benchmark.run_grid` (the log beside each result starts with the command that made it).",
         "",
         "Ours: mean ± std over seeds (population std), n = seeds in the cell; a seed's score is the mean return of "
-        "its last three evaluations, as the paper reports. Paper: its Table 2, mean ± std over three seeds (as "
+        "its last three evaluations, as the paper reports, except DAgger's: three evaluations of its final learner, which "
+        "trains for 50% (Hopper) to 60% (10000 demo steps) more gradient steps than BC-OH. Paper: its Table 2, mean ± std over three seeds (as "
         "transcribed from the paper). The expert is deterministic and evaluated once per env (as seed 0): its ± is the std over the "
         "evaluation episodes (ep.), on the clean env; the paper gives no std for it.",
         "",
@@ -268,26 +270,28 @@ def plot_curves(records: list, path: Path, experts=None, title="Learning curves"
     return True
 
 
-README_START, README_END = "<!-- table2 -->", "<!-- /table2 -->"
+PAGE = Path("docs/results.md")
+"""the page whose <!-- table2 --> block --page writes when it names no page"""
+PAGE_START, PAGE_END = "<!-- table2 -->", "<!-- /table2 -->"
 
 
-def readme_parts(readme: Path, start=README_START, end=README_END) -> tuple:
-    """The README's text up to its start marker, and from its end marker on."""
-    if not readme.is_file():
-        raise UsageError(f"README {readme} not found: check the --readme path")
-    text = readme.read_text()
+def page_parts(page: Path, start=PAGE_START, end=PAGE_END) -> tuple:
+    """The page's text up to its start marker, and from its end marker on."""
+    if not page.is_file():
+        raise UsageError(f"page {page} not found: check the --page path")
+    text = page.read_text()
     if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
-        raise UsageError(f"{readme} needs one {start} line and, after it, one {end} line: add them where the table goes")
+        raise UsageError(f"{page} needs one {start} line and, after it, one {end} line: add them where the table goes")
     return text[:text.index(start) + len(start)], text[text.index(end):]
 
 
-def update_readme(readme: Path, table: str, image: Path, start=README_START, end=README_END, title="Table 2", more_images=()):
-    """Put the table (without its title) and the plot between the README's markers, then more_images ((title, path)
-    pairs) under it; keep the rest."""
-    before, after = readme_parts(readme, start, end)
+def update_page(page: Path, table: str, image: Path, start=PAGE_START, end=PAGE_END, title="Table 2", more_images=()):
+    """Put the table (without its title) and the plot between the page's markers, then more_images ((title, path)
+    pairs) under it, linked relative to the page; keep the rest."""
+    before, after = page_parts(page, start, end)
     body = table.split("\n", 2)[2].strip()  # below the "# ..." title and its blank line
-    links = "\n\n".join(f"![{name}]({os.path.relpath(path, readme.parent)})" for name, path in [(title, image), *more_images])
-    write_text(readme, f"{before}\n{body}\n\n{links}\n{after}")
+    links = "\n\n".join(f"![{name}]({os.path.relpath(path, page.parent)})" for name, path in [(title, image), *more_images])
+    write_text(page, f"{before}\n{body}\n\n{links}\n{after}")
 
 
 def main(argv=None) -> int:
@@ -295,10 +299,11 @@ def main(argv=None) -> int:
     parser.add_argument("--results-dir", type=Path, default=Path("results/runs"), help="where benchmark.run_grid wrote the runs")
     parser.add_argument("--out", type=Path, default=Path("results"), help="where mujoco.csv, table2.md and table2.png go")
     parser.add_argument("--allow-nonpaper", action="store_true", help="include runs at settings other than the paper's")
-    parser.add_argument("--readme", type=Path, help=f"also put the table and plot into this file, between {README_START} and {README_END}")
+    parser.add_argument("--page", type=Path, nargs="?", const=PAGE,
+                        help=f"also put the table and pictures into this page (alone: {PAGE}), between {PAGE_START} and {PAGE_END}")
     args = parser.parse_args(argv)
-    if args.readme:
-        readme_parts(args.readme)  # check the markers before anything is written
+    if args.page:
+        page_parts(args.page)  # check the markers before anything is written
     if not args.results_dir.is_dir():
         raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.run_grid first, or pass --results-dir")
     records, problems = collect(args.results_dir, args.allow_nonpaper)
@@ -309,16 +314,16 @@ def main(argv=None) -> int:
     methods, envs, _ = build_table(records)
     rows = sorted(records, key=lambda r: (envs.index(r.env), methods.index(r.method), r.seed))
     write_text(args.out / "mujoco.csv", "env,method,seed,score\n" + "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in rows))
-    table = markdown(records, args.results_dir, args.out, args.allow_nonpaper, args.readme)
+    table = markdown(records, args.results_dir, args.out, args.allow_nonpaper, args.page)
     write_text(args.out / "table2.md", table)
     plot(records, args.out / "table2.png")
     curves_image = [("Learning curves", args.out / "curves.png")] if plot_curves(records, args.out / "curves.png") else []
-    if args.readme:
-        update_readme(args.readme, table, args.out / "table2.png", more_images=curves_image)
+    if args.page:
+        update_page(args.page, table, args.out / "table2.png", more_images=curves_image)
     print(table)
     print(f"wrote {args.out / 'mujoco.csv'} ({len(rows)} rows), {args.out / 'table2.md'}, {args.out / 'table2.png'}"
           + "".join(f", {image}" for _, image in curves_image)
-          + (f", and the table into {args.readme}" if args.readme else "")
+          + (f", and the table into {args.page}" if args.page else "")
           + (f"; left out {len(problems)} (listed above)" if problems else ""))
     return 0
 

@@ -1,13 +1,14 @@
 """Summarise the regime map (benchmark.regimes): per regime, env and method, how good and how sure.
 
-    python -m benchmark.regime_summary [--results-dir results/regimes] [--expert-runs results/runs] [--readme README.md]
+    python -m benchmark.regime_summary [--results-dir results/regimes] [--expert-runs results/runs] [--page [docs/regimes.md]]
 
 Reads <results-dir>/<regime>/runs/<method>/<env>/result_seeds<S>.json for every regime folder there and writes
 - <results-dir>/<regime>/mujoco.csv: env,method,seed,score (score = mean return of the seed's last three evaluations);
 - <results-dir>/<regime>/curves.png: evaluation return against epoch per env and method (aggregate.plot_curves);
 - <results-dir>/summary.md: per regime, env and method the mean over seeds, its 95% bootstrap interval, the seeds
   and the expert-normalised mean; the probability that C2F beats BC-OH and BC-OH beats BC-SO, with intervals;
-- <results-dir>/summary.png: the means with their intervals and the seeds, one panel per env.
+- <results-dir>/summary.png: the means with their intervals and the seeds, one panel per env;
+- with --page, the summary and its picture between the <!-- regimes --> markers of docs/regimes.md (or the page named).
 Corrupt or partial results, and runs at settings other than their regime's, are reported on stderr and left out.
 """
 import json
@@ -27,7 +28,9 @@ COMPARISONS = [("c2f", "bc_oh"), ("c2f_output", "bc_oh"), ("bc_oh", "bc_so")]
 """(A, B): report P(a seed of A beats a seed of B); the comparisons of the protocol, fixed before the runs"""
 ADDED_COMPARISONS = [("c2f", "bc_so")]
 """comparisons added after seeing runs (does C2F beat the history-free baseline?): reported as exploratory"""
-README_START, README_END = "<!-- regimes -->", "<!-- /regimes -->"
+PAGE = Path("docs/regimes.md")
+"""the page whose <!-- regimes --> block --page writes when it names no page"""
+PAGE_START, PAGE_END = "<!-- regimes -->", "<!-- /regimes -->"
 
 
 def collect(regime: str, results_dir: Path):
@@ -151,12 +154,13 @@ def main(argv=None) -> int:
     parser = OneLineParser(prog="python -m benchmark.regime_summary", description=__doc__.split("\n\n")[0])
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"where benchmark.regimes wrote the map (default {RESULTS_DIR})")
     parser.add_argument("--expert-runs", type=Path, default=Path("results/runs"), help="holds expert/<env>/result_seeds0.json (default results/runs)")
-    parser.add_argument("--readme", type=Path, help=f"also put the summary and plot into this file, between {README_START} and {README_END}")
+    parser.add_argument("--page", type=Path, nargs="?", const=PAGE,
+                        help=f"also put the summary and plot into this page (alone: {PAGE}), between {PAGE_START} and {PAGE_END}")
     args = parser.parse_args(argv)
     if not args.results_dir.is_dir():
         raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.regimes first, or pass --results-dir")
-    if args.readme:
-        aggregate.readme_parts(args.readme, README_START, README_END)  # check the markers before anything is written
+    if args.page:
+        aggregate.page_parts(args.page, PAGE_START, PAGE_END)  # check the markers before anything is written
     tables, empty, problems = {}, [], []
     for regime in [regime for regime in REGIMES if runs_dir(regime, args.results_dir).is_dir()]:
         records, regime_problems = collect(regime, args.results_dir)
@@ -175,15 +179,18 @@ def main(argv=None) -> int:
         rows = "".join(f"{r.env},{r.method},{r.seed},{r.score:.3f}\n" for r in records)
         write_text(args.results_dir / regime / "mujoco.csv", "env,method,seed,score\n" + rows)
         aggregate.plot_curves(records, args.results_dir / regime / "curves.png", experts, title=f"Learning curves, {regime}")
-    command = " ".join(["python -m benchmark.regime_summary", *(argv if argv is not None else sys.argv[1:])])
+    words = list(argv if argv is not None else sys.argv[1:])
+    if args.page == PAGE and "--page" in words and str(PAGE) not in words:  # a bare --page: name the page it wrote
+        words.insert(words.index("--page") + 1, str(PAGE))
+    command = " ".join(["python -m benchmark.regime_summary", *map(str, words)])
     summary, image = markdown(tables, empty, experts, command), args.results_dir / "summary.png"
     write_text(args.results_dir / "summary.md", summary)
     plot(tables, image)
-    if args.readme:
-        aggregate.update_readme(args.readme, summary, image, README_START, README_END, "Regime map")
+    if args.page:
+        aggregate.update_page(args.page, summary, image, PAGE_START, PAGE_END, "Regime map")
     print(summary)
     print(f"wrote {', '.join(f'{args.results_dir / r}/mujoco.csv, {args.results_dir / r}/curves.png' for r in tables)}, {args.results_dir / 'summary.md'}, {image}"
-          + (f", and the summary into {args.readme}" if args.readme else "") + (f"; left out {len(problems)} (listed above)" if problems else ""))
+          + (f", and the summary into {args.page}" if args.page else "") + (f"; left out {len(problems)} (listed above)" if problems else ""))
     return 0
 
 

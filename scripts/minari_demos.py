@@ -1,4 +1,4 @@
-"""Minari datasets in and out of the demo .npz format of the method files (see README.md, "Minari").
+"""Minari datasets in and out of the demo .npz format of the method files (see docs/methods.md, "Minari datasets").
 
     python scripts/minari_demos.py import mujoco/hopper/expert-v0 demos/hopper_expert.npz --num-samples 20000
     python scripts/minari_demos.py import ~/.minari/datasets/mujoco/hopper/expert-v0 demos/hopper_expert.npz

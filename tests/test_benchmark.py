@@ -7,6 +7,7 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from conftest import REPO_ROOT, assert_usage_error
@@ -46,6 +47,7 @@ if str(seed) != os.environ.get("FAKE_SILENT_SEED"):
 FAKE_EXPERT = '''
 import sys
 import time
+from pathlib import Path
 env = sys.argv[sys.argv.index("--env") + 1]
 returns = [3000.0, 3100.0, 2900.0, 3200.0]
 for i, value in enumerate(returns):
@@ -300,23 +302,51 @@ def test_aggregator_numbers_and_refusals(tmp_path, capsys):
 
 
 
-def test_aggregator_puts_the_table_into_the_readme_between_its_markers(tmp_path, capsys):
-    runs, out, readme = tmp_path / "runs", tmp_path / "results", tmp_path / "README.md"
+def test_aggregator_puts_the_table_into_the_page_between_its_markers(tmp_path, capsys):
+    runs, out, page = tmp_path / "runs", tmp_path / "results", tmp_path / "page.md"
     plant(runs, "c2f", "Ant-v4", 1, [4000.0, 5000.0, 6000.0])
-    readme.write_text("# Title\n\n<!-- table2 -->\nthe old table\n<!-- /table2 -->\n\nReading.\n")
-    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)]) == 0
-    text = readme.read_text()
+    page.write_text("# Title\n\n<!-- table2 -->\nthe old table\n<!-- /table2 -->\n\nReading.\n")
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--page", str(page)]) == 0
+    text = page.read_text()
     assert text.startswith("# Title\n\n<!-- table2 -->\nMade by `python -m benchmark.aggregate --results-dir ")
-    assert f"--readme {readme}` from 1 per-seed results" in text and "the old table" not in text
+    assert f"--page {page}` from 1 per-seed results" in text and "the old table" not in text
     assert "| Coarse-to-fine (`c2f`) | 5000 ± 0 (n=1) | 4798 ± 304 |" in text
     assert text.endswith("\n\n![Table 2](results/table2.png)\n\n![Learning curves](results/curves.png)\n<!-- /table2 -->\n\nReading.\n")
     assert (out / "table2.md").read_text().split("\n", 2)[2].strip() in text
 
-    readme.write_text("# Title without markers\n")
+    page.write_text("# Title without markers\n")
     (out / "mujoco.csv").unlink()
     with pytest.raises(UsageError, match="needs one <!-- table2 --> line and, after it, one <!-- /table2 --> line"):
-        aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)])
-    assert not (out / "mujoco.csv").exists(), "nothing is written before the README is checked"
+        aggregate.main(["--results-dir", str(runs), "--out", str(out), "--page", str(page)])
+    assert not (out / "mujoco.csv").exists(), "nothing is written before the page is checked"
+    with pytest.raises(UsageError, match="page .*missing.md not found"):
+        aggregate.main(["--results-dir", str(runs), "--out", str(out), "--page", str(tmp_path / "missing.md")])
+
+
+def test_a_bare_page_flag_writes_docs_results_md_with_links_relative_to_it(tmp_path, monkeypatch):
+    """--page alone is the page the aggregator owns, docs/results.md (relative to where it runs, as --out)."""
+    monkeypatch.chdir(tmp_path)
+    plant(tmp_path / "runs", "c2f", "Ant-v4", 1, [4000.0, 5000.0, 6000.0])
+    page = tmp_path / "docs" / "results.md"
+    page.parent.mkdir()
+    page.write_text("<!-- table2 -->\n<!-- /table2 -->\n")
+    assert aggregate.PAGE == Path("docs/results.md")
+    assert aggregate.main(["--results-dir", "runs", "--out", "results", "--page"]) == 0
+    text = page.read_text()
+    assert "--out results --page docs/results.md` from 1 per-seed results" in text
+    assert text.endswith("\n\n![Table 2](../results/table2.png)\n\n![Learning curves](../results/curves.png)\n<!-- /table2 -->\n")
+
+
+def test_docs_results_md_holds_the_committed_table2():
+    """The page the aggregator owns carries its block, and the block is the committed results/table2.md (rerun
+    `python -m benchmark.aggregate --page` after new runs)."""
+    aggregate.page_parts(REPO_ROOT / aggregate.PAGE)  # one pair of markers
+    block = (REPO_ROOT / aggregate.PAGE).read_text().split("<!-- table2 -->", 1)[1].split("<!-- /table2 -->")[0]
+    table = (REPO_ROOT / "results" / "table2.md").read_text()
+    assert table.split("\n", 2)[2].strip() in block
+    assert "--page docs/results.md` from" in table
+    assert "![Table 2](../results/table2.png)" in block and "![Learning curves](../results/curves.png)" in block
+
 
 def test_aggregator_without_valid_results_is_one_line(tmp_path):
     plant(tmp_path, "bc_oh", "Hopper-v4", 1, [1.0], epochs=3)

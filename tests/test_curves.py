@@ -1,4 +1,4 @@
-"""benchmark/aggregate.py's learning curves: the curve data against hand-computed figures, the picture, the README link,
+"""benchmark/aggregate.py's learning curves: the curve data against hand-computed figures, the picture, the link on the results page,
 and the per-regime curves of benchmark/regime_summary.py."""
 from pathlib import Path
 
@@ -48,24 +48,24 @@ def test_seeds_evaluated_at_other_epochs_are_averaged_only_where_all_have_a_poin
     assert aggregate.curves([Record("expert", "Hopper-v4", 0, 1.0, Path("x"), evaluations=[[0, 1.0]])]) == {}
 
 
-def test_the_aggregator_writes_the_curves_and_links_them_in_the_readme(runs, tmp_path, capsys):
-    out, readme = tmp_path / "results", tmp_path / "README.md"
-    readme.write_text("# Title\n\n<!-- table2 -->\nthe old table\n<!-- /table2 -->\n\nReading.\n")
-    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)]) == 0
+def test_the_aggregator_writes_the_curves_and_links_them_in_the_page(runs, tmp_path, capsys):
+    out, page = tmp_path / "results", tmp_path / "page.md"
+    page.write_text("# Title\n\n<!-- table2 -->\nthe old table\n<!-- /table2 -->\n\nReading.\n")
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--page", str(page)]) == 0
     assert (out / "curves.png").read_bytes()[:8] == PNG
     assert not list(out.glob("*.tmp*")), "written atomically: no temporary file left"
     assert f"{out / 'curves.png'}" in capsys.readouterr().out
-    assert readme.read_text().endswith(
+    assert page.read_text().endswith(
         "\n\n![Table 2](results/table2.png)\n\n![Learning curves](results/curves.png)\n<!-- /table2 -->\n\nReading.\n")
 
 
 def test_without_curves_nothing_is_drawn_or_linked(tmp_path):
-    runs, out, readme = tmp_path / "runs", tmp_path / "results", tmp_path / "README.md"
+    runs, out, page = tmp_path / "runs", tmp_path / "results", tmp_path / "page.md"
     plant_expert(runs, "Hopper-v4", 1000.0)
-    readme.write_text("<!-- table2 -->\n<!-- /table2 -->\n")
-    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--readme", str(readme)]) == 0
-    assert not (out / "curves.png").exists() and "curves.png" not in readme.read_text()
-    assert readme.read_text().endswith("\n\n![Table 2](results/table2.png)\n<!-- /table2 -->\n")
+    page.write_text("<!-- table2 -->\n<!-- /table2 -->\n")
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out), "--page", str(page)]) == 0
+    assert not (out / "curves.png").exists() and "curves.png" not in page.read_text()
+    assert page.read_text().endswith("\n\n![Table 2](results/table2.png)\n<!-- /table2 -->\n")
 
 
 def test_the_regime_summary_writes_curves_per_regime(regime_map, capsys):  # noqa: F811 (the fixture)

@@ -2,12 +2,13 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import REPO_ROOT, assert_usage_error
 from test_benchmark import plant
 
-from benchmark import regime_summary
+from benchmark import aggregate, regime_summary
 from benchmark.regimes import runs_dir
 from benchmark.results import make_result, result_path
 from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
@@ -138,15 +139,40 @@ def test_summary_numbers_files_and_left_out_runs(regime_map, capsys):
     assert (results / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_summary_goes_into_the_readme_between_its_markers(regime_map, tmp_path, capsys):
+def test_summary_goes_into_the_page_between_its_markers(regime_map, tmp_path, capsys):
     results, experts, _ = regime_map
-    readme = tmp_path / "README.md"
-    readme.write_text("# Title\n\n<!-- regimes -->\nthe old map\n<!-- /regimes -->\n\nReading.\n")
-    assert summarise(results, experts, "--readme", readme) == 0
-    text = readme.read_text()
+    page = tmp_path / "page.md"
+    page.write_text("# Title\n\n<!-- regimes -->\nthe old map\n<!-- /regimes -->\n\nReading.\n")
+    assert summarise(results, experts, "--page", page) == 0
+    text = page.read_text()
     assert text.startswith("# Title\n\n<!-- regimes -->\nMade by `python -m benchmark.regime_summary --results-dir ")
+    assert f"--page {page}` from 9 per-seed results" in text
     assert "the old map" not in text and (results / "summary.md").read_text().split("\n", 2)[2].strip() in text
     assert text.endswith("\n\n![Regime map](results/regimes/summary.png)\n<!-- /regimes -->\n\nReading.\n")
+
+
+def test_a_bare_page_flag_writes_docs_regimes_md_and_names_it(regime_map, tmp_path, monkeypatch):
+    """--page alone is the page the summary owns, docs/regimes.md; the summary's command line names it."""
+    results, experts, _ = regime_map
+    monkeypatch.chdir(tmp_path)
+    page = tmp_path / "docs" / "regimes.md"
+    page.parent.mkdir()
+    page.write_text("<!-- regimes -->\n<!-- /regimes -->\n")
+    assert regime_summary.PAGE == Path("docs/regimes.md")
+    assert summarise(results.relative_to(tmp_path), experts.relative_to(tmp_path), "--page") == 0
+    text = page.read_text()
+    assert "--expert-runs runs --page docs/regimes.md` from 9 per-seed results" in text
+    assert text.endswith("\n\n![Regime map](../results/regimes/summary.png)\n<!-- /regimes -->\n")
+
+
+def test_docs_regimes_md_holds_the_committed_map():
+    """The page the summary owns carries its block, and the block is the committed results/regimes/summary.md
+    (rerun `python -m benchmark.regime_summary --page` after new runs)."""
+    aggregate.page_parts(REPO_ROOT / regime_summary.PAGE, regime_summary.PAGE_START, regime_summary.PAGE_END)
+    block = (REPO_ROOT / regime_summary.PAGE).read_text().split("<!-- regimes -->", 1)[1].split("<!-- /regimes -->")[0]
+    summary = (REPO_ROOT / "results" / "regimes" / "summary.md").read_text()
+    assert summary.split("\n", 2)[2].strip() in block and "--page docs/regimes.md` from" in summary
+    assert "![Regime map](../results/regimes/summary.png)" in block
 
 
 def cli(*args):
@@ -155,11 +181,11 @@ def cli(*args):
 
 def test_bad_input_is_one_line_and_exit_2(regime_map, tmp_path):
     results, experts, _ = regime_map
-    readme = tmp_path / "README.md"
-    readme.write_text("# Title without markers\n")
-    result = cli("--results-dir", results, "--expert-runs", experts, "--readme", readme)
+    page = tmp_path / "page.md"
+    page.write_text("# Title without markers\n")
+    result = cli("--results-dir", results, "--expert-runs", experts, "--page", page)
     assert_usage_error(result, "needs one <!-- regimes --> line and, after it, one <!-- /regimes --> line")
-    assert result.returncode == 2 and not (results / "summary.md").exists(), "nothing is written before the README is checked"
+    assert result.returncode == 2 and not (results / "summary.md").exists(), "nothing is written before the page is checked"
     result = cli("--results-dir", tmp_path / "nowhere")
     assert_usage_error(result, "results folder")
     assert result.returncode == 2
