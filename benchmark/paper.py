@@ -1,4 +1,4 @@
-"""The paper's Table 2 and its MuJoCo settings (paper sections 5.1 and 8.3).
+"""The paper's Table 2, its Table 3 ablations (CARLA), and its MuJoCo settings (paper sections 5.1, 5.3 and 8.3).
 
 Everything the benchmark knows about the paper lives here, in one place.
 """
@@ -17,6 +17,14 @@ PAPER_TABLE2 = {
     "expert": {"Hopper": (3445, None), "Ant": (5566, None), "HalfCheetah": (1941, None)},
 }
 """method (file name without .py, or "expert") -> env family -> (mean, std or None)"""
+
+PAPER_TABLE3 = {
+    "c2f": (49.3, 3.6), "c2f_early": (51.4, 4.0), "c2f_middle": (49.6, 1.7), "c2f_feature": (39.8, 4.0),
+    "c2f_coarse_history": (37.1, 3.4), "c2f_coarse_history_policy_current": (31.7, 5.7),
+    "c2f_no_stop_gradient": (44.4, 5.5), "c2f_two_stage": (47.3, 3.8),
+}
+"""Table 3, the ablations on CARLA: runner variant -> (%success mean, std); the feature row is the ResNet layer-2
+feature as ζ. Rows run on MuJoCo only (output and penultimate fusion, no coarse action, BC-OH, BC-SO) are absent."""
 
 METHOD_NAMES = {
     "bc_so": "BC-SO", "bc_oh": "BC-OH", "c2f": "Coarse-to-fine", "fca": "FCA", "keyframe": "KeyFrame",

@@ -33,14 +33,15 @@ PAGE = Path("docs/regimes.md")
 PAGE_START, PAGE_END = "<!-- regimes -->", "<!-- /regimes -->"
 
 
-def collect(regime: str, results_dir: Path):
+def collect(regime: str, results_dir: Path, methods=METHODS):
     """aggregate.collect for one regime: its valid records, checked against the paper's settings changed by the
-    regime's flags (as benchmark.run_grid asks for them), and one line per file left out."""
+    regime's flags (as benchmark.run_grid asks for them), and one line per file left out. methods: the methods
+    kept (by default the map's; benchmark.table3 asks for the controls and Table 3 rows too), in their order."""
     records, problems = aggregate.collect(runs_dir(regime, results_dir), allow_nonpaper=True)
-    options = run_grid.Options(methods=METHODS, envs=ENVS, seeds=[], extra_args=REGIMES[regime][0])
+    options = run_grid.Options(methods=methods, envs=ENVS, seeds=[], extra_args=REGIMES[regime][0])
     kept = []
     for record in records:
-        if record.method not in METHODS or record.env not in ENVS:
+        if record.method not in methods or record.env not in ENVS:
             problems.append(f"left out {record.path}: {record.method} on {record.env} is not in the regime map")
             continue
         wanted = run_grid.wanted_settings(run_grid.Run(record.method, record.env, record.seed), options)
@@ -49,13 +50,14 @@ def collect(regime: str, results_dir: Path):
             problems.append(f"left out {record.path}: not the {regime} settings ({', '.join(differences)})")
             continue
         kept.append(record)
-    return sorted(kept, key=lambda r: (ENVS.index(r.env), METHODS.index(r.method), r.seed)), problems
+    return sorted(kept, key=lambda r: (ENVS.index(r.env), methods.index(r.method), r.seed)), problems
 
 
-def expert_scores(expert_runs: Path):
-    """{env: the PPO expert's score} for the envs whose expert result reads, and a line per env without one."""
+def expert_scores(expert_runs: Path, envs=ENVS):
+    """{env: the PPO expert's score} for the envs (by default the map's) whose expert result reads, and a line per
+    env without one."""
     scores, problems = {}, []
-    for env in ENVS:
+    for env in envs:
         path = expert_runs / EXPERT / env / "result_seeds0.json"
         try:
             scores[env] = statistics.fmean(entry["score"] for entry in read_result(path, EXPERT, env)["scores"].values())

@@ -50,12 +50,18 @@ def scripts_commit(scripts_dir: Path) -> str:
     return head.stdout.strip()
 
 
-def record_commit(folder: Path, commit: str, method: str):
-    """Write <method>/commit.txt, or check that the method's runs already there were made by the same commit.
+def recorded_commit(folder: Path, method: str):
+    """The commit.txt that says which commit made the method's runs in a regime's runs folder, or None.
     A method folder without its own commit.txt was made by the commit of the regime's commit.txt (the map's
     first runs); a method added later (a control, a Table 3 row) records its own."""
-    own, regime = folder / method / "commit.txt", folder / "commit.txt"
-    recorded = own if own.is_file() else regime if regime.is_file() and (folder / method).is_dir() else None
+    own, regime = Path(folder) / method / "commit.txt", Path(folder) / "commit.txt"
+    return own if own.is_file() else regime if regime.is_file() and (Path(folder) / method).is_dir() else None
+
+
+def record_commit(folder: Path, commit: str, method: str):
+    """Write <method>/commit.txt, or check that the method's runs already there were made by the same commit
+    (recorded_commit says which file holds it)."""
+    own, recorded = folder / method / "commit.txt", recorded_commit(folder, method)
     if recorded is not None and recorded.read_text().strip() != commit:
         raise UsageError(f"{folder / method} holds runs made by commit {recorded.read_text().strip()[:12]}, not {commit[:12]}: "
                          "run from a worktree of that commit (git worktree add ../map <commit>)")

@@ -1,0 +1,220 @@
+"""benchmark/table3.py on a small planted native_hidden map and replication: the declared verdicts, which seeds are
+pooled where, what is left out and why, the header's commits and machines, and the picture."""
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import REPO_ROOT, assert_usage_error
+from test_benchmark import plant
+from test_regime_summary import plant_expert, plant_variant
+
+from benchmark import table3
+from benchmark.paper import variant_flags
+from benchmark.regimes import runs_dir
+
+ENV = "Hopper-v4"
+
+
+def plant_run(runs, method, seed, score, **settings):
+    """A valid native_hidden result of method (a plain method file or a c2f variant, with the variant's flags) scoring
+    `score`; settings change it (e.g. hide_velocities=False)."""
+    settings = {"hide_velocities": True, **variant_flags(method), **settings}
+    if method in ("bc_so", "bc_oh", "c2f"):
+        return plant(runs, method, ENV, seed, [score] * 3, **settings)
+    return plant_variant(runs, method, "c2f", ENV, seed, [score] * 3, **settings)
+
+
+def set_machine(path, cpu, capability):
+    result = json.loads(path.read_text())
+    result["machine"] = {"cpu": cpu, "cpu_capability": capability, "torch": "2.13.0+cpu"}
+    path.write_text(json.dumps(result))
+
+
+@pytest.fixture
+def planted(tmp_path):
+    """Map seeds 1-5 and replication seeds 6-10 of C2F (1000 + 10 per seed) and BC-OH (500 + 10 per seed); the
+    controls on seeds 1-10 in the map: no-coarse 600 + 10 per seed (below every C2F seed), penultimate 5 above each
+    BC-OH seed (a tie); the Table 3 rows on seeds 1-5, each planted to meet or miss its prediction; and files to
+    leave out. Commits: the map aaaa, the controls bbbb, the replication cccc. Expert 1000."""
+    results, replication, experts = tmp_path / "regimes", tmp_path / "replication", tmp_path / "runs"
+    runs, rep = runs_dir("native_hidden", results), runs_dir("native_hidden", replication)
+    for seed in range(1, 11):
+        folder = runs if seed <= 5 else rep
+        plant_run(folder, "c2f", seed, 1000.0 + 10 * (seed - 1))
+        plant_run(folder, "bc_oh", seed, 500.0 + 10 * (seed - 1))
+        set_machine(plant_run(runs, "c2f_no_coarse", seed, 600.0 + 10 * (seed - 1)), "Test CPU", "AVX2")
+        set_machine(plant_run(runs, "c2f_penultimate", seed, 505.0 + 10 * (seed - 1)), "Test CPU", "AVX512")
+    rows = {"bc_so": [100.0] * 5,
+            "c2f_middle": [1005.0, 995.0, 1015.0, 1025.0, 1035.0],  # among C2F's seeds: no difference, confirmed
+            "c2f_early": [2000.0] * 5,  # above every C2F seed: 'no difference' refuted
+            "c2f_output": [300.0] * 5,  # reported only
+            "c2f_feature": [200.0] * 5,  # below C2F: worse, confirmed
+            "c2f_coarse_history": [505.0, 515.0, 525.0, 535.0, 545.0],  # below C2F, among BC-OH: falls to BC-OH, confirmed
+            "c2f_coarse_history_policy_current": [50.0] * 5,  # below both: falls to BC-OH or below, confirmed
+            "c2f_no_stop_gradient": [3000.0] * 5,  # above C2F: worse, refuted
+            "c2f_two_stage": [900.0, 910.0]}  # two seeds: incomplete
+    for method, scores in rows.items():
+        for seed, score in enumerate(scores, 1):
+            plant_run(runs, method, seed, score)
+    plant(runs, "bc_oh", "Walker2d-v4", 1, [80.0] * 3, hide_velocities=True)  # valid, but not part of these tests: not listed
+    left_out = [
+        f"left out {plant_run(runs, 'c2f_two_stage', 3, 5000.0, hide_velocities=False)}: not the native_hidden settings (hide_velocities False != True)",
+        f"left out {plant_run(runs, 'c2f', 6, 5000.0, fusion='middle')}: not the native_hidden settings (fusion middle != late)",
+        f"left out {plant_run(runs, 'c2f_middle', 7, 5000.0)}: seed 7 is not among the seeds declared for c2f_middle (1–5)",
+        f"left out {plant_run(rep, 'bc_so', 6, 5000.0)}: the replication counts only for the capacity test",
+        f"left out {plant_run(rep, 'bc_oh', 5, 5000.0)}: seed 5 of bc_oh is in the map too (the map's counts)",
+        f"left out {runs / 'c2f_early' / ENV / 'result_seeds6.json'}: unreadable JSON",
+    ]
+    (runs / "c2f_early" / ENV / "result_seeds6.json").write_text("{not json")
+    (runs / "commit.txt").write_text("a" * 40 + "\n")
+    for method in ("c2f_no_coarse", "c2f_penultimate"):
+        (runs / method / "commit.txt").write_text("b" * 40 + "\n")
+    (rep / "commit.txt").write_text("c" * 40 + "\n")
+    plant_expert(experts, ENV, 1000.0)
+    return results, replication, experts, left_out
+
+
+def summarise(results, replication, experts):
+    return table3.main(["--results-dir", str(results), "--replication-dir", str(replication), "--expert-runs", str(experts)])
+
+
+def test_capacity_test_pools_map_and_replication_and_gives_the_declared_verdicts(planted, capsys):
+    results, replication, experts, _ = planted
+    assert summarise(results, replication, experts) == 0
+    table = (results / "native_hidden" / "table3.md").read_text()
+    assert capsys.readouterr().out.startswith(table)
+    # every C2F seed 1-10 (1000-1090) above every control seed (600-690): separated above 0.5
+    assert "| 1. capacity | P(C2F > no-coarse control) | 1.00 | [1.00, 1.00] | n=10 vs 10 | C2F beats the control |" in table
+    # penultimate 505-595 against BC-OH 500-590: seed k beats k of BC-OH's seeds, 55 of 100 pairs
+    assert "| 2. ζ at BC-OH's capacity | P(penultimate fusion > BC-OH) | 0.55 |" in table
+    assert "| n=10 vs 10 | 0.5 inside the interval: not decided |" in table
+    assert "| reported, not a test | P(no-coarse control > BC-OH) | 1.00 | [1.00, 1.00] | n=10 vs 10 | reported, not a test |" in table
+    # the sides: C2F's seeds 1-5 from the map and 6-10 from the replication (the replication's seed 5 of BC-OH is left out)
+    assert "| C2F (`c2f`) | 1–10 | 10 | 1045 | " in table and ", ".join(str(1000 + 10 * k) for k in range(10)) in table
+    assert "| BC-OH (`bc_oh`) | 1–10 | 10 | 545 | " in table
+
+
+def test_table3_rows_use_seeds_1_to_5_only_and_give_the_declared_verdicts(planted):
+    results, replication, experts, _ = planted
+    summarise(results, replication, experts)
+    part = (results / "native_hidden" / "table3.md").read_text().split("## Table 3 on MuJoCo", 1)[1].split("## Left out")[0]
+    rows = {line.split(" | ")[0].strip("| "): line for line in part.splitlines() if line.startswith("| ") and "(`" in line.split(" | ")[0]}
+    # not pooled: C2F's row is the map's seeds 1-5 (mean 1020, not 1045), and so are the controls' rows
+    assert rows["C2F (late fusion, the paper) (`c2f`)"] == ("| C2F (late fusion, the paper) (`c2f`) | (default) | n=5 | 1020 | [1008, 1032] | 1.02 | — | "
+                                                          "1.00 [1.00, 1.00] | 49.3 ± 3.6 | (the paper's model) | — |")
+    assert "| `--no-coarse-action` | n=5 | 620 |" in rows["no coarse action (`c2f_no_coarse`)"]
+    assert "| `--fusion penultimate` | n=5 | 525 |" in rows["penultimate fusion (`c2f_penultimate`)"]
+    verdicts = {name: line.rstrip(" |").rsplit(" | ", 1)[1] for name, line in rows.items()}
+    assert verdicts == {
+        "C2F (late fusion, the paper) (`c2f`)": "—",
+        "middle fusion (`c2f_middle`)": "confirmed",
+        "early fusion (`c2f_early`)": "refuted",
+        "output fusion (`c2f_output`)": "reported only",
+        "penultimate fusion (`c2f_penultimate`)": "refuted",  # 525 on seeds 1-5: below every C2F seed, not 'no difference'
+        "feature as ζ (`c2f_feature`)": "confirmed",
+        "BC-OH as π_φ and π_θ (`c2f_coarse_history`)": "confirmed",
+        "BC-OH as π_φ + BC-SO as π_θ (`c2f_coarse_history_policy_current`)": "confirmed",
+        "no stop-gradient (`c2f_no_stop_gradient`)": "refuted",
+        "two-stage (`c2f_two_stage`)": "incomplete (n=2 of 5): no verdict",
+        "no coarse action (`c2f_no_coarse`)": "reported only",
+        "BC-OH (`bc_oh`)": "—",
+        "BC-SO (`bc_so`)": "—",
+    }
+    assert ("| `--coarse-output feature` | n=5 | 200 | [200, 200] | 0.20 | 0.00 [0.00, 0.00] | 0.00 [0.00, 0.00] | 39.8 ± 4.0 | "
+            "worse | confirmed |") in rows["feature as ζ (`c2f_feature`)"]
+    assert rows["BC-SO (`bc_so`)"] == ("| BC-SO (`bc_so`) | — | n=5 | 100 | [100, 100] | 0.10 | 0.00 [0.00, 0.00] | "
+                                       "0.00 [0.00, 0.00] | — | (reference) | — |")
+    assert rows["BC-OH (`bc_oh`)"] == "| BC-OH (`bc_oh`) | — | n=5 | 520 | [508, 532] | 0.52 | 0.00 [0.00, 0.00] | — | — | (reference) | — |"
+    assert "n=2, incomplete" in rows["two-stage (`c2f_two_stage`)"] and "| 47.3 ± 3.8 | worse, a little |" in rows["two-stage (`c2f_two_stage`)"]
+
+
+def test_rows_without_runs_say_so_and_an_incomplete_capacity_test_gives_no_verdict(planted):
+    results, replication, experts, _ = planted
+    runs = runs_dir("native_hidden", results)
+    for seed in range(2, 11):
+        (runs / "c2f_no_coarse" / ENV / f"result_seeds{seed}.json").unlink()
+    for seed in range(1, 6):
+        (runs / "c2f_middle" / ENV / f"result_seeds{seed}.json").unlink()
+    summarise(results, replication, experts)
+    table = (results / "native_hidden" / "table3.md").read_text()
+    assert "| 1. capacity | P(C2F > no-coarse control) | 1.00 | [1.00, 1.00] | n=10 vs 1 | incomplete (n=10 vs 1 of 10): no verdict yet |" in table
+    assert "| n=1 vs 10 | reported, not a test (incomplete) |" in table
+    assert "| no-coarse control (`c2f_no_coarse`) | 1 | 1 | 600 | [600, 600] | 0.60 | 600 |" in table
+    assert ("| middle fusion (`c2f_middle`) | `--fusion middle` | no runs yet | — | — | — | — | — | 49.6 ± 1.7 | no difference | "
+            "no runs yet |") in table
+    assert "| `--no-coarse-action` | n=1, incomplete | 600 |" in table and "incomplete (n=1 of 5): no verdict" in table
+
+
+def test_results_at_other_settings_or_seeds_are_left_out_with_their_reason(planted, capsys):
+    results, replication, experts, left_out = planted
+    summarise(results, replication, experts)
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == len(left_out) and all(any(line.startswith(reason) for line in err) for reason in left_out), err
+    table = (results / "native_hidden" / "table3.md").read_text()
+    listed = table.split("## Left out\n\n", 1)[1].splitlines()
+    assert [line.removeprefix("- ") for line in listed if line] == err  # the same lines, in table3.md too
+    assert "Walker2d" not in "\n".join(err)  # valid runs of another env are not part of these tests, nor errors
+
+
+def test_header_names_the_command_commits_machines_and_that_comparisons_are_unpaired(planted):
+    results, replication, experts, _ = planted
+    summarise(results, replication, experts)
+    table = (results / "native_hidden" / "table3.md").read_text()
+    header = table.split("## The capacity test", 1)[0]
+    assert f"Made by `python -m benchmark.table3 --results-dir {results} --replication-dir {replication} --expert-runs {experts}`" in header
+    assert f"map (`{runs_dir('native_hidden', results)}`): `aaaaaaaaaaaa` (runs/commit.txt): c2f, c2f_middle," in header
+    assert "`bbbbbbbbbbbb` (runs/<method>/commit.txt): c2f_penultimate, c2f_no_coarse." in header
+    assert f"replication (`{runs_dir('native_hidden', replication)}`): `cccccccccccc` (runs/commit.txt): c2f, bc_oh." in header
+    assert "Test CPU, AVX2: c2f_no_coarse 1–10" in header and "Test CPU, AVX512: c2f_penultimate 1–10" in header
+    assert "not recorded: c2f 1–10, c2f_middle 1–5," in header and "bc_oh 1–10" in header
+    assert "Unpaired comparisons, as declared" in header and "`--hide-velocities`" in header
+
+
+def test_the_picture_is_written(planted):
+    results, replication, experts, _ = planted
+    summarise(results, replication, experts)
+    assert (results / "native_hidden" / "table3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list((results / "native_hidden").glob("*.tmp*")), "atomic writes leave no temporary file"
+
+
+@pytest.mark.parametrize("rule, vs_c2f, vs_bc_oh, verdict", [
+    (table3.NO_DIFFERENCE, (0.3, 0.7), (0.9, 1.0), "confirmed"),
+    (table3.NO_DIFFERENCE, (0.5, 0.9), (0.9, 1.0), "confirmed"),  # a bound at 0.5 still holds it
+    (table3.NO_DIFFERENCE, (0.0, 0.4), (0.4, 0.6), "refuted"),
+    (table3.NO_DIFFERENCE, (0.6, 1.0), (0.9, 1.0), "refuted"),
+    (table3.WORSE, (0.0, 0.4), (0.4, 0.6), "confirmed"),
+    (table3.WORSE, (0.2, 0.7), (0.4, 0.6), "not confirmed"),
+    (table3.WORSE, (0.6, 1.0), (0.9, 1.0), "refuted"),
+    (table3.FALLS, (0.0, 0.4), (0.3, 0.7), "confirmed"),
+    (table3.FALLS, (0.0, 0.4), (0.0, 0.2), "not confirmed"),  # below BC-OH too: not 'falls to BC-OH'
+    (table3.FALLS, (0.0, 0.4), (0.6, 1.0), "not confirmed"),
+    (table3.FALLS, (0.6, 1.0), (0.9, 1.0), "refuted"),
+    (table3.FALLS_OR_BELOW, (0.0, 0.4), (0.0, 0.2), "confirmed"),
+    (table3.FALLS_OR_BELOW, (0.0, 0.4), (0.3, 0.7), "confirmed"),
+    (table3.FALLS_OR_BELOW, (0.0, 0.4), (0.6, 1.0), "not confirmed"),
+    (table3.FALLS_OR_BELOW, (0.3, 0.7), (0.0, 0.2), "not confirmed"),
+    (table3.REPORTED_ONLY, (0.0, 0.1), (0.0, 0.1), "reported only"),
+])
+def test_row_verdicts_follow_the_declared_rules(rule, vs_c2f, vs_bc_oh, verdict):
+    assert table3.row_verdict(rule, vs_c2f, vs_bc_oh) == verdict
+
+
+def test_capacity_verdicts_follow_the_declared_rule():
+    above, below = "C2F beats the control", "the control beats C2F"
+    apart, tie = [float(s) for s in range(100, 110)], [float(s) + 0.5 for s in range(10)]
+    assert table3.capacity_verdict(apart, tie, above, below) == above
+    assert table3.capacity_verdict(tie, apart, above, below) == below
+    assert table3.capacity_verdict(tie, [s + 0.25 for s in tie], above, below) == "0.5 inside the interval: not decided"
+    assert table3.capacity_verdict(apart, apart[:9], above, below) == "incomplete (n=10 vs 9 of 10): no verdict yet"
+
+
+def test_seed_ranges():
+    assert table3.seed_ranges([3, 1, 2, 5, 6, 9]) == "1–3, 5–6, 9" and table3.seed_ranges([]) == "none"
+
+
+def test_no_map_folder_is_one_line_and_exit_2(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "benchmark.table3", "--results-dir", str(tmp_path / "nowhere")],
+                            cwd=REPO_ROOT, capture_output=True, text=True)
+    assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
+    assert result.returncode == 2
