@@ -10,6 +10,7 @@ random makes copying the previous action from it less reliable. In evaluation th
 """
 import hashlib
 import json
+import multiprocessing
 import os
 import platform
 import re
@@ -35,7 +36,9 @@ class Args:
     frame_skip: Optional[int] = None
     """simulator steps per action; None: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant (episodes and rewards are rescaled to the same simulated time and return scale)"""
     seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
-    """training seeds, run one after another; each seed's result is written when it ends, and a rerun keeps the seeds already done with the same settings; the score is mean ± std over them"""
+    """training seeds, run in parallel by --workers; each seed's result is written when it ends, and a rerun keeps the seeds already done with the same settings; the score is mean ± std over them"""
+    workers: Optional[int] = None
+    """seeds trained at the same time, each in its own process; None: as many as the machine's cores (os.sched_getaffinity), at most one per seed; always 1 with --cuda"""
     demos: Optional[str] = None
     """demonstrations (.npz, format in README); None: roll out the expert once and cache under demos/"""
     expert: str = "experts/{env}.pt"
@@ -169,7 +172,8 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             later_seeds = len(args.seeds) - 1 - args.seeds.index(seed) if seed in args.seeds else 0
-            eta = (time.time() - start) / epoch * (args.epochs - epoch + later_seeds * args.epochs) / 60  # for the whole run
+            waves = later_seeds // (args.workers or 1)  # the later seeds run --workers at a time
+            eta = (time.time() - start) / epoch * (args.epochs - epoch + waves * args.epochs) / 60  # for the whole run
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last} | "
                   f"{1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
@@ -222,25 +226,25 @@ def run(args):
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
-    device = torch.device("cuda" if args.cuda else "cpu")
     torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
     demos = load_or_generate_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
-    per_seed = {}
+    per_seed, to_train = {}, []
     for seed in args.seeds:
         seed_path = os.path.join(output_dir, f"result_seeds{seed}.json")
         per_seed[seed] = finished_seed(seed_path, args)
         if per_seed[seed]:
             print(f"seed {seed}: kept its finished result {seed_path}, made with these settings (delete it to train the seed again)")
-            continue
-        result = train_seed(args, demos, seed, device)
-        score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
-        per_seed[seed] = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
-        if args.save_model:
-            checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
-                          "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
-            write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
-        write_result(seed_path, args, output_dir, {seed: per_seed[seed]})  # now: an interrupted run keeps this seed
+        else:
+            to_train.append(seed)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    args.workers = 1 if args.cuda else max(1, min(args.workers or cores, len(to_train)))  # the GPU: one seed at a time
+    if args.workers == 1:
+        entries = [train_and_record(args, demos, seed, output_dir) for seed in to_train]
+    else:  # spawn, not fork: torch and MuJoCo are not fork-safe (and macOS has no fork default)
+        with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+            entries = pool.starmap(train_and_record, [(args, demos, seed, output_dir) for seed in to_train], chunksize=1)
+    per_seed.update(zip(to_train, entries))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
     write_result(result_path, args, output_dir, per_seed)
     print(f"\n{'seed':>6} | {'score':>8}")
@@ -250,6 +254,24 @@ def run(args):
     print(summary_line(args, [entry["score"] for entry in per_seed.values()]))
 
 
+# Copied from bc_oh.train_and_record
+def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
+    """Train one seed, write its model (with --save-model) and its result_seeds<seed>.json; returns its entry of the
+    result. run calls it in this process, or in a worker process of its pool (--workers)."""
+    torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
+    device = torch.device("cuda" if args.cuda else "cpu")
+    result = train_seed(args, demos, seed, device)
+    score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
+    entry = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
+    if args.save_model:
+        checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"],
+                      "act_dim": result["act_dim"], "state_dict": result["policy"].cpu().state_dict()}
+        write_atomically(os.path.join(output_dir, f"seed{seed}.pt"), lambda file: torch.save(checkpoint, file))
+    write_result(os.path.join(output_dir, f"result_seeds{seed}.json"), args, output_dir, {seed: entry})  # now: an interrupted run keeps this seed
+    sys.stdout.flush()  # a worker's prints reach the terminal before the pool ends it
+    return entry
+
+
 # Copied from bc_oh.run_name
 def run_name(args) -> str:
     """{run_name} in --output-dir: METHOD, then every flag given a value other than its default
@@ -257,7 +279,7 @@ def run_name(args) -> str:
     Flags that change no result (seeds, where results go, the device) are left out."""
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
-        if name in ("seeds", "output_dir", "save_model", "cuda", "cuda_graph") or value == getattr(defaults, name):
+        if name in ("seeds", "workers", "output_dir", "save_model", "cuda", "cuda_graph") or value == getattr(defaults, name):
             continue
         flag = name.replace("_", "-")
         text = "-".join(map(str, value)) if isinstance(value, list) else os.path.basename(str(value)).removesuffix(".npz").removesuffix(".pt")
@@ -269,7 +291,7 @@ def run_name(args) -> str:
 def finished_seed(path: str, args) -> Optional[dict]:
     """The entry of the one seed in the result at path, if an earlier run wrote it with these same settings (and
     with --save-model, its model): a rerun of an interrupted command trains only the seeds it had not finished."""
-    ignored = ("seeds", "output_dir", "cuda", "cuda_graph", "save_model")
+    ignored = ("seeds", "workers", "output_dir", "cuda", "cuda_graph", "save_model")
     try:
         with open(path) as file:
             result = json.load(file)
@@ -311,7 +333,7 @@ class UsageError(Exception):
 # Copied from bc_oh.check_common_args
 def check_common_args(args):
     """Reject bad values of the arguments every method shares, before anything slow happens."""
-    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes", "frame_skip", "learning_rate"):
+    for name in ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes", "frame_skip", "learning_rate", "workers"):
         if getattr(args, name, None) is not None and not getattr(args, name) > 0:
             raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}: pass a positive value, or leave it out for its default")
     if args.obs_noise_std < 0:

@@ -37,7 +37,7 @@ EXPERT_SEED = 0
 """the expert's one evaluation per env is stored as seed 0"""
 SET_BY_RUNNER = ("env", "seeds", "output_dir")
 """flags the runner sets per combination: not allowed in --extra-args"""
-NOT_SETTINGS = ("cuda", "cuda_graph", "save_model")
+NOT_SETTINGS = ("cuda", "cuda_graph", "save_model", "workers")
 """flags that do not change a result: a result made with or without them counts as done either way"""
 
 

@@ -67,8 +67,9 @@ def fake_demos(n=256, obs_dim=11, act_dim=3, episode_length=50, seed=0):
 
 
 def tiny_args(module, **overrides):
-    """module.Args on Hopper-v4 with a budget of a few milliseconds (lr set: run() normally fills it in)."""
-    settings = dict(env="Hopper-v4", seeds=[1], epochs=2, batch_size=32, hidden=32, eval_every=1, eval_episodes=1, learning_rate=1e-3)
+    """module.Args on Hopper-v4 with a budget of a few milliseconds (lr set: run() normally fills it in), its seeds
+    trained in this process (workers=1: a pool's processes would not see the test's monkeypatches)."""
+    settings = dict(env="Hopper-v4", seeds=[1], workers=1, epochs=2, batch_size=32, hidden=32, eval_every=1, eval_episodes=1, learning_rate=1e-3)
     return module.Args(**{**settings, **overrides})
 
 

@@ -143,6 +143,8 @@ OWN_VERSIONS = {
     ("average_ensemble.py", "run"): "it also scores and reports each ensemble member by the same rule",
     ("average_ensemble.py", "fit"): "it evaluates each member beside the ensemble and logs both losses",
     ("fca.py", "fit"): "it decays the adversary's learning rate too and logs the adversary's mean error",
+    ("dagger.py", "train_and_record"): "a seed's entry also holds its bc_oh round 0 score and its rounds",
+    ("average_ensemble.py", "train_and_record"): "a seed's entry also scores each ensemble member, and its result sums them up",
     ("dagger.py", "fit"): "it trains one round: the rounds share one minibatch generator and one epoch count (the evaluation seeds)",
 }
 SHARED_BEFORE_THE_BANNER = {"evaluate", "fit"}
