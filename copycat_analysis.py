@@ -263,7 +263,8 @@ def load_or_generate_demos(args, env: gym.Env) -> dict:
         raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
     if not os.path.isfile(path):
         raise UsageError(f"no expert for {args.env} at {os.path.abspath(expert_path)} (--expert is relative to the working directory, and the "
-                         "repository's experts are in its experts/ folder): run from the repository root, pass --expert PATH or --demos")
+                         "repository's experts are in its experts/ folder): run from the repository root, pass --expert PATH or --demos, "
+                         f"or train one with `python expert_ppo.py --env {args.env}`")
     recorded_env = demo_meta(path).get("env_id")
     if recorded_env and recorded_env != args.env:
         raise UsageError(f"{path} holds demos of {recorded_env}, not {args.env}: pass --env {recorded_env}, or demos of {args.env}")
