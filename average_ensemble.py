@@ -198,7 +198,9 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
                 member_evaluations[name].append((epoch, float(np.mean(evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
-            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            later_seeds = len(args.seeds) - 1 - args.seeds.index(seed) if seed in args.seeds else 0
+            waves = later_seeds // (args.workers or 1)  # the later seeds run --workers at a time
+            eta = (time.time() - start) / epoch * (args.epochs - epoch + waves * args.epochs) / 60  # for the whole run
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             last += "".join(f", {name} {evals[-1][1]:.1f}" for name, evals in member_evaluations.items() if evals)
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {loss_text} | last eval {last} | "

@@ -251,7 +251,9 @@ def fit(args, policy: nn.Module, optimizer, train_step, num_samples: int, seed: 
                 evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device)))))
             policy.train()
         if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, progress["epochs"] // 20) == 0:
-            eta = (time.time() - progress["start"]) / epoch * (progress["epochs"] - epoch) / 60
+            later_seeds = len(args.seeds) - 1 - args.seeds.index(seed) if seed in args.seeds else 0
+            waves = later_seeds // (args.workers or 1)  # the later seeds run --workers at a time
+            eta = (time.time() - progress["start"]) / epoch * (progress["epochs"] - epoch + waves * progress["epochs"]) / 60  # for the whole run
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f} | last eval {last} | "
                   f"{1000 * progress['train_time'] / progress['steps']:.2f} ms/step | ETA {eta:.1f} min", flush=True)

@@ -220,7 +220,9 @@ def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num
             evaluations.append((epoch, float(np.mean(evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)))))
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
-            eta = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            later_seeds = len(args.seeds) - 1 - args.seeds.index(seed) if seed in args.seeds else 0
+            waves = later_seeds // (args.workers or 1)  # the later seeds run --workers at a time
+            eta = (time.time() - start) / epoch * (args.epochs - epoch + waves * args.epochs) / 60  # for the whole run
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             print(f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | adversary error {adversary_error.item():.5f} | "
                   f"last eval {last} | {1000 * train_time / step:.2f} ms/step | ETA {eta:.1f} min", flush=True)
