@@ -4,28 +4,33 @@ import json
 import re
 
 from conftest import assert_usage_error, link_experts, run_in_process, run_script
-from test_pinned_output import BUDGET, FIXED_MODE
+import pytest
+from test_pinned_output import BUDGET, FIXED_MODE, PINNED
 
 TWO_SEEDS = (*BUDGET[:BUDGET.index("--seeds")], *BUDGET[BUDGET.index("--seeds") + 2:], "--seeds", 1, 2)
 """test_pinned_output's tiny budget, with two seeds"""
 
 
-def tiny_run(folder, workers: int) -> tuple:
+def tiny_run(folder, script: str, workers: int) -> tuple:
     """({seed: its printed epoch lines without timings}, {seed: its JSON evaluations}, the combined JSON) of a run."""
     folder.mkdir()
     link_experts(folder)
-    result = run_script("bc_oh.py", *TWO_SEEDS, "--workers", workers, "--output-dir", folder / "out", cwd=folder, env=FIXED_MODE)
+    flags = PINNED[script][1]  # dagger's small rounds; none for the others
+    result = run_script(f"{script}.py", *TWO_SEEDS, *flags, "--workers", workers, "--output-dir", folder / "out", cwd=folder, env=FIXED_MODE)
     assert result.returncode == 0, result.stderr
-    lines = {seed: re.findall(rf"^seed {seed} \| (.*last eval \S+) \| [\d.]+ ms/step", result.stdout, re.M) for seed in (1, 2)}
+    lines = {seed: re.findall(rf"^seed {seed} \| (.*last eval \S+(?:, \w+ \S+)*) \| [\d.]+ ms/step", result.stdout, re.M) for seed in (1, 2)}
     evaluations = {seed: json.loads((folder / "out" / f"result_seeds{seed}.json").read_text())["scores"][str(seed)]["evaluations"]
                    for seed in (1, 2)}
     return lines, evaluations, json.loads((folder / "out" / "result_seeds1-2.json").read_text())
 
 
-def test_two_workers_train_each_seed_as_one_worker_does(tmp_path):
-    parallel_lines, parallel_evaluations, combined = tiny_run(tmp_path / "two", 2)
-    lines, evaluations, sequential = tiny_run(tmp_path / "one", 1)
-    assert all(len(lines[seed]) == 3 for seed in (1, 2)) and lines[1] != lines[2]
+@pytest.mark.parametrize("script", ["bc_oh", "average_ensemble", "dagger"])
+def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script):
+    """bc_oh stands for the scripts that share its training loop; average_ensemble and dagger have their own fits."""
+    parallel_lines, parallel_evaluations, combined = tiny_run(tmp_path / "two", script, 2)
+    lines, evaluations, sequential = tiny_run(tmp_path / "one", script, 1)
+    assert all(len(lines[seed]) == len(PINNED[script][2]) for seed in (1, 2)) and lines[1] != lines[2]
+    assert lines[1] == PINNED[script][2]  # seed 1 of two prints what seed 1 alone prints
     assert parallel_lines == lines
     assert parallel_evaluations == evaluations
     assert list(combined["scores"]) == ["1", "2"] and combined["args"]["seeds"] == [1, 2] and combined["args"]["workers"] == 2
