@@ -17,6 +17,7 @@ It prints a table and writes the pictures and a JSON report to --output-dir.
 
     python bc_so.py --env Hopper-v4 --seeds 1 --save-model     # likewise bc_oh.py and c2f.py
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
+    python copycat_analysis.py --env Hopper-v4 --no-coarse runs/c2f__no-coarse-action/Hopper-v4/seed1.pt   # and the capacity control
 """
 import hashlib
 import json
@@ -42,7 +43,8 @@ gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in
 # ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
 mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHODS = ("bc_so", "bc_oh", "c2f")
-COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green"}
+CONTROL = "c2f_no_coarse"  # the capacity control, c2f.py --no-coarse-action: C2F's network, zeros in place of zeta
+COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green", CONTROL: "tab:gray"}
 
 
 @dataclass
@@ -55,6 +57,8 @@ class Args:
     """BC-OH model written by `bc_oh.py --save-model`"""
     c2f: str = "runs/c2f/{env}/seed1.pt"
     """C2F model written by `c2f.py --save-model` (with --coarse-output action, the default)"""
+    no_coarse: Optional[str] = None
+    """optional fourth model: the capacity control, `c2f.py --no-coarse-action --save-model` (do(o_hist) and the copycat score only: it reads no zeta)"""
     demos: Optional[str] = None
     """held-out demonstrations (.npz, the method scripts' format); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
     expert: str = "experts/{env}.pt"
@@ -444,9 +448,10 @@ class C2FPolicy(nn.Module):
         return self.coarse_and_final(obs_history)[1]
 
 
-def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
-    """Rebuild the policy a method script saved with --save-model; returns (policy, its training args)."""
-    flag = "--" + method.replace("_", "-")
+def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, control: bool = False):
+    """Rebuild the policy a method script saved with --save-model; returns (policy, its training args).
+    control: the model of --no-coarse, a c2f.py model trained with --no-coarse-action."""
+    flag = "--no-coarse" if control else "--" + method.replace("_", "-")
     if not os.path.isfile(path):
         raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model`, or pass {flag} PATH")
     try:
@@ -458,6 +463,9 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
         raise UsageError(f"{flag} {path} is a {saved_method} model, not {method}: pass the model written by {method}.py")
     if saved_env != env_id:
         raise UsageError(f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}")
+    if method == "c2f" and saved.get("coarse_action", True) == control:
+        raise UsageError(f"{flag} {path} is a c2f model trained with{'out' * control} --no-coarse-action: pass "
+                         + ("C2F's own model as --c2f" if saved.get("coarse_action", True) else "it as --no-coarse (it reads no zeta)"))
     if method == "c2f" and saved.get("coarse_output") == "feature":
         raise UsageError(f"{flag} {path} passes a feature, not an action zeta, to its policy model: do(zeta) needs a C2F model trained with --coarse-output action")
     history, hidden, inputs = saved["history"], saved["hidden"], torch.zeros(2, obs_dim * saved["history"])  # the Normalizer's statistics come from the state_dict
@@ -475,8 +483,9 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int):
     return policy.eval(), saved
 
 
-def agreed(saved: dict, key: str, flag: str, readers=METHODS, fix="pass models trained alike"):
-    """The training value of `key` shared by the models in `readers`, or a clear error when they differ."""
+def agreed(saved: dict, key: str, flag: str, readers=None, fix="pass models trained alike"):
+    """The training value of `key` shared by the models in `readers` (default: all), or a clear error when they differ."""
+    readers = tuple(saved) if readers is None else readers
     values = {method: saved[method].get(key) for method in readers}
     if len(set(map(str, values.values()))) > 1:
         raise UsageError(f"the models were trained with different {flag} ({values}): {fix}")
@@ -664,15 +673,19 @@ def check_args(args):
 
 
 def run(args):
-    """Load the three models, intervene on held-out demos and on their own rollouts, report and draw."""
+    """Load the three models (four with --no-coarse), intervene on held-out demos and on their own rollouts, report and draw."""
     check_args(args)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     low, high = env.action_space.low, env.action_space.high
     models, saved = {}, {}
+    paths = {method: getattr(args, method).format(env=args.env) for method in METHODS}
     for method in METHODS:
-        models[method], saved[method] = load_model(getattr(args, method).format(env=args.env), method, args.env, obs_dim, act_dim)
-    model_history = agreed(saved, "history", "--history", ("bc_oh", "c2f"), "pass models trained with one history length")  # BC-SO reads o_t only: any history fits it
+        models[method], saved[method] = load_model(paths[method], method, args.env, obs_dim, act_dim)
+    if args.no_coarse:
+        paths[CONTROL] = args.no_coarse.format(env=args.env)
+        models[CONTROL], saved[CONTROL] = load_model(paths[CONTROL], "c2f", args.env, obs_dim, act_dim, control=True)
+    model_history = agreed(saved, "history", "--history", tuple(m for m in saved if m != "bc_so"), "pass models trained with one history length")  # BC-SO reads o_t only: any history fits it
     history = args.history or model_history
     if history != model_history:
         raise UsageError(f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}")
@@ -689,16 +702,16 @@ def run(args):
     steps = np.flatnonzero(~starts)  # steps with a previous action in their episode
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
-    actors = {method: as_actor(models[method], low, high) for method in METHODS}
-    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.eval_episodes)] for method in METHODS}
+    actors = {method: as_actor(model, low, high) for method, model in models.items()}
+    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.eval_episodes)] for method in models}
     changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
-    for method in METHODS:
+    for method in models:
         change, towards = history_intervention(actors[method], histories[steps], obs_dim, actions[steps - 1], scale)
         roll_histories, roll_prev = with_previous(rollouts[method])
         roll_change, roll_towards = history_intervention(actors[method], roll_histories, obs_dim, roll_prev, scale)
         changes["held-out demos"][method], changes["own rollouts"][method] = change, roll_change
         report[method] = {
-            "model": getattr(args, method).format(env=args.env),
+            "model": paths[method],
             "rollout_returns": [episode["return"] for episode in rollouts[method]],
             "history_change_demos": float(change.mean()), "towards_previous_demos": float(towards.mean()),
             "history_change_rollouts": float(roll_change.mean()), "towards_previous_rollouts": float(roll_towards.mean()),
@@ -722,9 +735,9 @@ def run(args):
 
     print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, {'velocities hidden' if hide else f'noise std {std}'}, history {history}, frame skip {frame_skip or 'native'}")
     print("do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}")
-    print(f"{'method':>6} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
+    print(f"{'method':>13} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
     for method, row in report.items():
-        print(f"{method:>6} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
+        print(f"{method:>13} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
               f"{row['history_change_rollouts']:15.3f} | {row['towards_previous_rollouts']:7.2f} | {row['copycat_score']:13.2f}")
     print("do(zeta), c2f: CE = |pi(do(zeta_d) = lo_d) - pi(do(zeta_d) = hi_d)|_d, and CE / (hi - lo)")
     print(f"{'dim':>3} | {'lo':>6} | {'hi':>6} | {'CE demos':>8} | {'rel':>5} | {'CE rollouts':>11} | {'rel':>5}")

@@ -142,8 +142,8 @@ def test_zeta_intervention_on_a_c2f_model(demos, weight):
 
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory):
-    """Tiny models of the three methods, saved by the real scripts' run() from their command lines
-    (in-process: three interpreter starts would cost more than the training)."""
+    """Tiny models of the three methods and of the no-coarse control, saved by the real scripts' run() from
+    their command lines (in-process: four interpreter starts would cost more than the training)."""
     workdir = link_experts(tmp_path_factory.mktemp("copycat"))
     budget = ["--epochs", "1", "--num-demo-samples", "300", "--eval-episodes", "1", "--seeds", "1", "--save-model"]
     cwd = os.getcwd()
@@ -152,9 +152,10 @@ def saved(tmp_path_factory):
         for method in ca.METHODS:
             script = importlib.import_module(method)
             script.run(tyro.cli(script.Args, args=[*budget, "--output-dir", f"models/{method}"]))
+        importlib.import_module("c2f").run(tyro.cli(importlib.import_module("c2f").Args, args=[*budget, "--no-coarse-action", "--output-dir", f"models/{ca.CONTROL}"]))
     finally:
         os.chdir(cwd)
-    return workdir, {method: workdir / "models" / method / "seed1.pt" for method in ca.METHODS}
+    return workdir, {method: workdir / "models" / method / "seed1.pt" for method in (*ca.METHODS, ca.CONTROL)}
 
 
 def model_flags(paths, **overrides):
@@ -166,10 +167,13 @@ def model_flags(paths, **overrides):
 
 def test_report_and_pictures_on_saved_models(saved):
     workdir, paths = saved
-    result = run_script("copycat_analysis.py", *model_flags(paths), "--num-demo-samples", 300, "--eval-episodes", 1, "--output-dir", "out", cwd=workdir)
+    result = run_script("copycat_analysis.py", *model_flags(paths), "--no-coarse", paths[ca.CONTROL], "--num-demo-samples", 300,
+                        "--eval-episodes", 1, "--output-dir", "out", cwd=workdir)
     assert result.returncode == 0, result.stderr
-    assert "copycat score" in result.stdout and "do(zeta)" in result.stdout
+    assert "copycat score" in result.stdout and "do(zeta)" in result.stdout and f"\n{ca.CONTROL} | " in result.stdout
     report = json.loads((workdir / "out" / "copycat_analysis.json").read_text())
+    assert list(report["methods"]) == [*ca.METHODS, ca.CONTROL] and report["methods"][ca.CONTROL]["model"] == str(paths[ca.CONTROL])
+    assert report["methods"][ca.CONTROL]["history_change_demos"] > 0  # the control reads its history, as BC-OH does
     assert report["demo_steps"] == 300 and report["changepoints"] >= 29 and report["history"] == 2
     bc_so = report["methods"]["bc_so"]  # reads o_t only: do(o_hist) cannot move it
     assert bc_so["history_change_demos"] == 0 and bc_so["towards_previous_rollouts"] == 0
@@ -181,6 +185,13 @@ def test_report_and_pictures_on_saved_models(saved):
     assert all(0 <= value <= 1 for value in zeta["relative_demos"] + zeta["relative_rollouts"])
     for picture in ("zeta_effect.png", "history_intervention.png"):
         assert (workdir / "out" / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_control_and_c2f_in_each_others_place_are_refused(saved, monkeypatch):
+    """do(zeta) of the control would be zero by construction, and C2F is no capacity control."""
+    workdir, paths = saved
+    assert "trained with --no-coarse-action: pass it as --no-coarse" in bad_run(workdir, paths, monkeypatch, c2f=paths[ca.CONTROL])
+    assert "trained without --no-coarse-action: pass C2F's own model as --c2f" in bad_run(workdir, paths, monkeypatch, no_coarse=str(paths["c2f"]))
 
 
 def test_a_model_of_another_method_is_rejected_in_one_line(saved):
