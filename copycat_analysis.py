@@ -17,7 +17,7 @@ It prints a table and writes the pictures and a JSON report to --output-dir.
 
     python bc_so.py --env Hopper-v4 --seeds 1 --save-model     # likewise bc_oh.py and c2f.py
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
-    python copycat_analysis.py --env Hopper-v4 --no-coarse runs/c2f__no-coarse-action/Hopper-v4/seed1.pt   # and the capacity control
+    python copycat_analysis.py --env Hopper-v4 --control runs/c2f__no-coarse-action/Hopper-v4/seed1.pt   # and the capacity control
 """
 import hashlib
 import json
@@ -57,7 +57,7 @@ class Args:
     """BC-OH model written by `bc_oh.py --save-model`"""
     c2f: str = "runs/c2f/{env}/seed1.pt"
     """C2F model written by `c2f.py --save-model` (with --coarse-output action, the default)"""
-    no_coarse: Optional[str] = None
+    control: Optional[str] = None
     """optional fourth model: the capacity control, `c2f.py --no-coarse-action --save-model` (do(o_hist) and the copycat score only: it reads no zeta)"""
     demos: Optional[str] = None
     """held-out demonstrations (.npz, the method scripts' format); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
@@ -450,8 +450,8 @@ class C2FPolicy(nn.Module):
 
 def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, control: bool = False):
     """Rebuild the policy a method script saved with --save-model; returns (policy, its training args).
-    control: the model of --no-coarse, a c2f.py model trained with --no-coarse-action."""
-    flag = "--no-coarse" if control else "--" + method.replace("_", "-")
+    control: the model of --control, a c2f.py model trained with --no-coarse-action."""
+    flag = "--control" if control else "--" + method.replace("_", "-")
     if not os.path.isfile(path):
         raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model`, or pass {flag} PATH")
     try:
@@ -465,7 +465,7 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, 
         raise UsageError(f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}")
     if method == "c2f" and saved.get("coarse_action", True) == control:
         raise UsageError(f"{flag} {path} is a c2f model trained with{'out' * control} --no-coarse-action: pass "
-                         + ("C2F's own model as --c2f" if saved.get("coarse_action", True) else "it as --no-coarse (it reads no zeta)"))
+                         + ("C2F's own model as --c2f" if saved.get("coarse_action", True) else "it as --control (it reads no zeta)"))
     if method == "c2f" and saved.get("coarse_output") == "feature":
         raise UsageError(f"{flag} {path} passes a feature, not an action zeta, to its policy model: do(zeta) needs a C2F model trained with --coarse-output action")
     history, hidden, inputs = saved["history"], saved["hidden"], torch.zeros(2, obs_dim * saved["history"])  # the Normalizer's statistics come from the state_dict
@@ -673,7 +673,7 @@ def check_args(args):
 
 
 def run(args):
-    """Load the three models (four with --no-coarse), intervene on held-out demos and on their own rollouts, report and draw."""
+    """Load the three models (four with --control), intervene on held-out demos and on their own rollouts, report and draw."""
     check_args(args)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -682,8 +682,8 @@ def run(args):
     paths = {method: getattr(args, method).format(env=args.env) for method in METHODS}
     for method in METHODS:
         models[method], saved[method] = load_model(paths[method], method, args.env, obs_dim, act_dim)
-    if args.no_coarse:
-        paths[CONTROL] = args.no_coarse.format(env=args.env)
+    if args.control:
+        paths[CONTROL] = args.control.format(env=args.env)
         models[CONTROL], saved[CONTROL] = load_model(paths[CONTROL], "c2f", args.env, obs_dim, act_dim, control=True)
     model_history = agreed(saved, "history", "--history", tuple(m for m in saved if m != "bc_so"), "pass models trained with one history length")  # BC-SO reads o_t only: any history fits it
     history = args.history or model_history

@@ -167,7 +167,7 @@ def model_flags(paths, **overrides):
 
 def test_report_and_pictures_on_saved_models(saved):
     workdir, paths = saved
-    result = run_script("copycat_analysis.py", *model_flags(paths), "--no-coarse", paths[ca.CONTROL], "--num-demo-samples", 300,
+    result = run_script("copycat_analysis.py", *model_flags(paths), "--control", paths[ca.CONTROL], "--num-demo-samples", 300,
                         "--eval-episodes", 1, "--output-dir", "out", cwd=workdir)
     assert result.returncode == 0, result.stderr
     assert "copycat score" in result.stdout and "do(zeta)" in result.stdout and f"\n{ca.CONTROL} | " in result.stdout
@@ -190,8 +190,8 @@ def test_report_and_pictures_on_saved_models(saved):
 def test_the_control_and_c2f_in_each_others_place_are_refused(saved, monkeypatch):
     """do(zeta) of the control would be zero by construction, and C2F is no capacity control."""
     workdir, paths = saved
-    assert "trained with --no-coarse-action: pass it as --no-coarse" in bad_run(workdir, paths, monkeypatch, c2f=paths[ca.CONTROL])
-    assert "trained without --no-coarse-action: pass C2F's own model as --c2f" in bad_run(workdir, paths, monkeypatch, no_coarse=str(paths["c2f"]))
+    assert "trained with --no-coarse-action: pass it as --control" in bad_run(workdir, paths, monkeypatch, c2f=paths[ca.CONTROL])
+    assert "trained without --no-coarse-action: pass C2F's own model as --c2f" in bad_run(workdir, paths, monkeypatch, control=str(paths["c2f"]))
 
 
 def test_a_model_of_another_method_is_rejected_in_one_line(saved):
