@@ -453,7 +453,8 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, 
     control: the model of --control, a c2f.py model trained with --no-coarse-action."""
     flag = "--control" if control else "--" + method.replace("_", "-")
     if not os.path.isfile(path):
-        raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model`, or pass {flag} PATH")
+        raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model"
+                         f"{' --no-coarse-action' * control}`, or pass {flag} PATH")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         saved_method, saved_env, saved = checkpoint["method"], checkpoint["env_id"], checkpoint["args"]

@@ -214,6 +214,8 @@ def bad_run(workdir, paths, monkeypatch, **settings):
 def test_missing_model(saved, monkeypatch):
     message = bad_run(*saved, monkeypatch, bc_oh="nowhere/seed1.pt")
     assert "bc_oh model nowhere/seed1.pt not found" in message and "--save-model" in message
+    message = bad_run(*saved, monkeypatch, control="nowhere/seed1.pt")
+    assert "c2f model nowhere/seed1.pt not found" in message and "--save-model --no-coarse-action`, or pass --control PATH" in message
 
 
 def test_history_that_does_not_match_the_models(saved, monkeypatch):
