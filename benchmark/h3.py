@@ -32,6 +32,16 @@ REMADE = ["bc_so", "bc_oh", "c2f"]
 """the models re-made into <h3-dir>; the control's model is the map's own run"""
 
 
+FIGURES = ["history_change_demos", "towards_previous_demos", "history_change_rollouts", "towards_previous_rollouts", "copycat_score"]
+"""copycat_analysis.py's figures per model that h3.md tabulates (and rollout_returns)"""
+
+
+def numbers(values, length=None) -> bool:
+    """Whether values is a list of finite numbers (of `length` entries, if given)."""
+    return isinstance(values, list) and bool(values) and (length is None or len(values) == length) and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < float("inf") for v in values)
+
+
 def seed_of(report: dict, model: str):
     """The seed of a model in a report, from its file name (seed<S>.pt), or None."""
     name = Path(report["methods"][model]["model"]).name
@@ -46,8 +56,12 @@ def read_report(path: Path, models, hidden: bool) -> tuple:
         if report["env"] != ENV or bool(report.get("hide_velocities")) != hidden:
             raise ValueError(f"not {ENV} with the velocities {'hidden' if hidden else 'noisy'}")
         seeds = {model: seed_of(report, model) for model in models}
+        rows, zeta = [report["methods"][model] for model in models], report["zeta"]
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"unreadable report ({type(error).__name__}: {error})")
+    if not all(numbers(row.get("rollout_returns")) and numbers([row.get(k) for k in FIGURES]) for row in rows) or not (
+            numbers(zeta.get("relative_demos")) and numbers(zeta.get("relative_rollouts"), len(zeta["relative_demos"]))):
+        raise ValueError("a figure is missing or not a number (not a report of this copycat_analysis.py)")
     if len(set(seeds.values())) != 1 or None in seeds.values():
         raise ValueError(f"its models are not one seed's ({', '.join(f'{m}: seed {s}' for m, s in seeds.items())})")
     return seeds["c2f"], report
@@ -67,7 +81,9 @@ def gather(analysis_dir: Path, reference_dir: Path) -> tuple:
     for path in sorted(reference_dir.glob("**/copycat_analysis.json")):
         try:
             if analysis_dir.resolve() not in path.resolve().parents and not json.loads(path.read_text()).get("hide_velocities"):
-                seed, report = read_report(path, ["bc_so", "bc_oh", "c2f"], hidden=False)
+                seed, report = read_report(path, REMADE, hidden=False)
+                if seed in references:
+                    raise ValueError(f"a second report of seed {seed} (the first, by path, is kept)")
                 references[seed] = report
         except (ValueError, OSError, UnicodeDecodeError, AttributeError) as error:  # JSONDecodeError is a ValueError
             problems.append(f"left out reference {path}: {error}")
@@ -109,17 +125,17 @@ def markdown(reports: dict, references: dict, ours: dict, mapped: dict, problems
               "closer to a_{t−1} than to a_t. BC-SO reads only o_t, so its history figures are 0.", "",
               "| seed | model | return (3 rollouts) | history change, demos | towards a_{t−1}, demos "
               "| history change, rollouts | towards a_{t−1}, rollouts | copycat score |", "|---|---|" + "---:|" * 6]
-    keys = ["history_change_demos", "towards_previous_demos", "history_change_rollouts", "towards_previous_rollouts", "copycat_score"]
     for model, name in MODELS.items():
         rows = [(seed, reports[seed]["methods"][model]) for seed in seeds]
-        for seed, row in rows + ([("mean", {k: statistics.fmean(r[k] for _, r in rows) for k in keys} |
-                                  {"rollout_returns": [x for _, r in rows for x in r["rollout_returns"]]})] if rows else []):
-            lines.append(f"| {seed} | {name} | {statistics.fmean(row['rollout_returns']):.0f} | "
-                         + " | ".join(figure(row[k], 2 if k.startswith("towards") or k == "copycat_score" else 3) for k in keys) + " |")
+        mean = {k: statistics.fmean(row[k] for _, row in rows) for k in FIGURES}
+        mean["rollout_returns"] = [x for _, row in rows for x in row["rollout_returns"]]  # the mean of every rollout
+        for seed, row in rows + [("mean", mean)]:
+            shares = " | ".join(figure(row[k], 3 if k.startswith("history") else 2) for k in FIGURES)
+            lines.append(f"| {seed} | {name} | {statistics.fmean(row['rollout_returns']):.0f} | {shares} |")
     weights = [w for report in references.values() for w in report["zeta"]["relative_demos"]]
     lines += ["", "## do(ζ): C2F's weight on the coarse action, here and at the paper's setting", "",
-              "CE/(hi − lo) per action dim: 1 when C2F's action follows ζ fully, 0 when it ignores it (lo, hi: the 5th "
-              "and 95th percentiles of the demo actions). The paper's setting is the native rate with noise on the "
+              "CE/(hi − lo) per action dim: 1 when C2F's action follows ζ fully, 0 when it ignores it (lo, hi: the "
+              "demo actions' quantiles of `--zeta-quantile`). The paper's setting is the native rate with noise on the "
               "velocities (the Table 2 grid's models, `analysis/Hopper-v4/`)"
               + (f"; there, the same figure was {min(weights):.2f}–{max(weights):.2f}." if weights else "."), "",
               "| seed | here, demos | here, rollouts | paper's setting, demos |", "|---|---:|---:|---:|"]

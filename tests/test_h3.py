@@ -54,6 +54,8 @@ def planted(tmp_path):
         f"left out {write(analysis / 'seed7' / 'copycat_analysis.json', report(7, hidden=False))}: not Hopper-v4 with the velocities hidden",
         f"left out {write(analysis / 'seed8' / 'copycat_analysis.json', '{cut')}: unreadable report (JSONDecodeError",
         f"left out reference {write(reference / 'seed9' / 'copycat_analysis.json', '[]')}",
+        f"left out reference {write(reference / 'other' / 'copycat_analysis.json', report(1, hidden=False, zeta=(0.9,) * 3))}: "
+        "a second report of seed 1 (the first, by path, is kept)",
         f"left out {plant_run(runs_dir('native_hidden', remade), 'bc_oh', 3, 5.0, hide_velocities=False)}: not the native_hidden settings",
     ]
     return ["--analysis-dir", str(analysis), "--reference", str(reference), "--h3-dir", str(remade), "--results-dir", str(results)], \
@@ -116,3 +118,18 @@ def test_the_committed_h3_page_is_what_the_tool_makes_from_the_committed_reports
                    capture_output=True)
     made = (copy / "h3.md").read_text().replace(f" --analysis-dir {copy}", "")
     assert made == (committed / "h3.md").read_text(), "analysis h3.md is stale: run python -m benchmark.h3"
+
+
+def test_a_report_with_a_missing_or_bad_figure_is_left_out(planted, capsys):
+    argv, analysis, _ = planted
+    broken = report(6)
+    broken["methods"]["bc_oh"]["copycat_score"] = None
+    write(analysis / "seed6" / "copycat_analysis.json", broken)
+    no_zeta = report(10)
+    del no_zeta["zeta"]
+    write(analysis / "seed10" / "copycat_analysis.json", no_zeta)
+    assert h3.main(argv) == 0
+    err = capsys.readouterr().err
+    assert f"left out {analysis / 'seed6' / 'copycat_analysis.json'}: a figure is missing or not a number" in err
+    assert f"left out {analysis / 'seed10' / 'copycat_analysis.json'}: unreadable report (KeyError" in err
+    assert "| 6 |" not in (analysis / "h3.md").read_text().split("## Left out")[0]
