@@ -59,8 +59,9 @@ def read_report(path: Path, models, hidden: bool) -> tuple:
         rows, zeta = [report["methods"][model] for model in models], report["zeta"]
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"unreadable report ({type(error).__name__}: {error})")
-    if not all(numbers(row.get("rollout_returns")) and numbers([row.get(k) for k in FIGURES]) for row in rows) or not (
-            numbers(zeta.get("relative_demos")) and numbers(zeta.get("relative_rollouts"), len(zeta["relative_demos"]))):
+    if not all(isinstance(row, dict) and numbers(row.get("rollout_returns")) and numbers([row.get(k) for k in FIGURES])
+               for row in rows) or not (isinstance(zeta, dict) and numbers(zeta.get("relative_demos"))
+                                        and numbers(zeta.get("relative_rollouts"), len(zeta["relative_demos"]))):
         raise ValueError("a figure is missing or not a number (not a report of this copycat_analysis.py)")
     if len(set(seeds.values())) != 1 or None in seeds.values():
         raise ValueError(f"its models are not one seed's ({', '.join(f'{m}: seed {s}' for m, s in seeds.items())})")
@@ -163,6 +164,11 @@ def main(argv=None) -> int:
         raise UsageError(f"no valid {args.analysis_dir}/seed<S>/copycat_analysis.json: run copycat_analysis.py as docs/regimes.md shows")
     ours, mapped, more = run_scores(args.h3_dir, args.results_dir)
     problems += more
+    for seed in sorted(reports):
+        problems += [f"no valid result of {m} seed {seed} under {args.h3_dir if m in REMADE else args.results_dir}: its score shows —"
+                     for m in MODELS if (m, seed) not in ours]
+        problems += [f"no valid result of {m} seed {seed} in the map ({args.results_dir}): its map score shows —"
+                     for m in REMADE if (m, seed) not in mapped]
     for problem in problems:
         print(problem, file=sys.stderr)
     command = " ".join(["python -m benchmark.h3", *(argv if argv is not None else sys.argv[1:])])

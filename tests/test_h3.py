@@ -133,3 +133,16 @@ def test_a_report_with_a_missing_or_bad_figure_is_left_out(planted, capsys):
     assert f"left out {analysis / 'seed6' / 'copycat_analysis.json'}: a figure is missing or not a number" in err
     assert f"left out {analysis / 'seed10' / 'copycat_analysis.json'}: unreadable report (KeyError" in err
     assert "| 6 |" not in (analysis / "h3.md").read_text().split("## Left out")[0]
+
+
+def test_a_missing_score_or_a_malformed_zeta_is_named_not_a_traceback(planted, capsys):
+    argv, analysis, _ = planted
+    odd = report(11)
+    odd["zeta"] = 3
+    write(analysis / "seed11" / "copycat_analysis.json", odd)
+    (analysis.parent.parent / "h3" / "native_hidden" / "runs" / "c2f" / ENV / "result_seeds2.json").unlink()
+    assert h3.main(argv) == 0
+    err = capsys.readouterr().err
+    assert f"left out {analysis / 'seed11' / 'copycat_analysis.json'}: a figure is missing or not a number" in err
+    assert f"no valid result of c2f seed 2 under {analysis.parent.parent / 'h3'}: its score shows —" in err
+    assert "| 2 | 200 (map 1200) | 201 (map 1201) | — (map 1202) | 1203 |" in (analysis / "h3.md").read_text()
