@@ -72,24 +72,20 @@ class Args:
     """train on the GPU when there is one"""
     cuda_graph: bool = True
     """with --cuda, replay each training step as one captured CUDA graph (the fast path; it agrees with eager steps to float rounding); --no-cuda-graph for plain eager steps"""
-    adversary_weight: float = 1.0
-    """w in MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}) (the authors' default; their Hopper command used 2.0).
-    The encoder and policy use --learning-rate (same defaults and linear decay as bc_oh.py, so FCA differs
-    from BC-OH only by its method; the authors used 2e-4) with Adam betas (0.5, 0.999)"""
-    adversary_lr: float = 2e-4
-    """Adam learning rate of the adversary D (betas (0.5, 0.999), decayed linearly like --learning-rate;
-    the authors' default 2e-4, their Hopper command 4e-4)"""
+    adversary_weight: Optional[float] = None
+    """w in MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}); None: the authors', 2 on Hopper (their Hopper command), 1 otherwise"""
+    adversary_lr_ratio: Optional[float] = None
+    """D's Adam learning rate over G's and F's (--learning-rate, decayed alike); None: the authors', 2 on Hopper, 1 otherwise"""
     encoder_hidden: int = 300
-    """width of the encoder's three hidden layers and of the one hidden layer of the policy head and the
-    adversary (the authors' 300)"""
+    """width of the encoder's three hidden layers and of the one hidden layer of the policy head and the adversary (the authors' 300)"""
     embedding_dim: int = 100
     """size of the history embedding e (the authors' 100)"""
 
     def __post_init__(self):
-        if not self.adversary_weight >= 0:
+        if self.adversary_weight is not None and not self.adversary_weight >= 0:
             raise UsageError(f"--adversary-weight must be >= 0, got {self.adversary_weight}: 0 gives BC-OH on the FCA network")
-        for name in ("adversary_lr", "encoder_hidden", "embedding_dim"):
-            if not getattr(self, name) > 0:
+        for name in ("adversary_lr_ratio", "encoder_hidden", "embedding_dim"):
+            if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
 
 
@@ -115,18 +111,32 @@ def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out_dim))
 
 
+def authors_init(module: nn.Module):
+    """The authors' weights_init: Xavier-uniform Linear weights, zero biases, BatchNorm scales drawn from N(1, 0.02^2)."""
+    if isinstance(module, nn.Linear):
+        nn.init.xavier_uniform_(module.weight)
+        if module.bias is not None:
+            nn.init.zeros_(module.bias)
+    elif isinstance(module, nn.BatchNorm1d):
+        nn.init.normal_(module.weight, 1.0, 0.02)
+        nn.init.zeros_(module.bias)
+
+
 class Policy(nn.Module):
     """FCA: encoder G over the flattened history -> embedding e, policy head F(e) -> a_t, and the adversary
-    D(e, a_t) -> a_{t-1}, used only in training. G has the authors' three hidden layers with LeakyReLU(0.2)
-    (their BatchNorm layers are left out: the inputs are already normalised)."""
+    D(e, a_t) -> a_{t-1}, used only in training. G is the authors': three hidden layers of Linear -> BatchNorm1d ->
+    LeakyReLU(0.2) (the first Linear without bias). BatchNorm bounds the embedding's scale: G maximises D's error,
+    and without a bound it can inflate e instead of removing what e says about a_{t-1}."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, embedding_dim: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.encoder = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, hidden), nn.LeakyReLU(0.2),
-                                     nn.Linear(hidden, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, embedding_dim))
+        self.encoder = nn.Sequential(nn.Linear(obs_dim * history, hidden, bias=False), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2),
+                                     nn.Linear(hidden, hidden), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2),
+                                     nn.Linear(hidden, hidden), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, embedding_dim))
         self.head = head(embedding_dim, act_dim, hidden)
         self.adversary = head(embedding_dim + act_dim, act_dim, hidden)  # conditioned on the true a_t
+        self.apply(authors_init)
 
     def embed(self, obs_history):
         return self.encoder(self.normalize(obs_history))
@@ -148,27 +158,30 @@ def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndar
     return stack_history(actions, episode_starts, 2)[:, : actions.shape[1]]
 
 
-def adversary_step(policy: Policy, optimizer, obs_history, actions, previous) -> torch.Tensor:
-    """One step of D on MSE(D(e, a_t), a_{t-1}), the embedding held fixed; returns that loss."""
-    with torch.no_grad():
-        embedding = policy.embed(obs_history)
-    loss = ((policy.predict_previous_action(embedding, actions) - previous) ** 2).mean()
+def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> torch.Tensor:
+    """One step of D on MSE(D(e, a_t), a_{t-1}), the embedding held fixed (detached); returns that loss."""
+    loss = ((policy.predict_previous_action(embedding.detach(), actions) - previous) ** 2).mean()
     optimizer.zero_grad()
     loss.backward()
     optimizer.step()
     return loss.detach()
 
 
-def encoder_policy_step(policy: Policy, optimizer, obs_history, actions, previous, weight: float):
+def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):
     """One step of G and F (optimizer holds only theirs) on MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}):
     fit a_t while making a_{t-1} unpredictable for the current D. Returns (BC loss, adversary loss)."""
-    embedding = policy.embed(obs_history)
     bc_loss = ((policy.head(embedding) - actions) ** 2).mean()
     adversary_loss = ((policy.predict_previous_action(embedding, actions) - previous) ** 2).mean()
     optimizer.zero_grad()
     (bc_loss - weight * adversary_loss).backward()
     optimizer.step()
     return bc_loss.detach(), adversary_loss.detach()
+
+
+def authors_setting(env_id: str, weight: Optional[float], lr_ratio: Optional[float]) -> tuple:
+    """(w, D's lr / G's lr): the flags, or the authors' values (their Hopper command: w = 2, D at 4e-4 against 2e-4)."""
+    hopper = env_id.startswith("Hopper")
+    return (2.0 if hopper else 1.0) if weight is None else weight, (2.0 if hopper else 1.0) if lr_ratio is None else lr_ratio
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:
@@ -183,20 +196,23 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     print(f"seed {seed} | adversary reference: predicting a_(t-1) = a_t has error {((previous - targets) ** 2).mean().item():.5f}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     fast = device.type == "cuda" and args.cuda_graph
+    weight, lr_ratio = authors_setting(args.env, args.adversary_weight, args.adversary_lr_ratio)
+    print(f"seed {seed} | w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {args.learning_rate * lr_ratio:g}")
     optimizer = make_adam([*policy.encoder.parameters(), *policy.head.parameters()], args.learning_rate, fast, betas=(0.5, 0.999))
-    adversary_optimizer = make_adam(policy.adversary.parameters(), args.adversary_lr, fast, betas=(0.5, 0.999))
+    adversary_optimizer = make_adam(policy.adversary.parameters(), args.learning_rate * lr_ratio, fast, betas=(0.5, 0.999))
 
-    def train_step(idx):  # alternating updates: the adversary D, then the encoder G and the policy head F
-        adversary_loss = adversary_step(policy, adversary_optimizer, inputs[idx], targets[idx], previous[idx])
-        loss, _ = encoder_policy_step(policy, optimizer, inputs[idx], targets[idx], previous[idx], args.adversary_weight)
+    def train_step(idx):  # alternating updates, as the authors: the adversary D, then the encoder G and the policy head F
+        embedding = policy.embed(inputs[idx])  # once a step: BatchNorm's running statistics move once a step
+        adversary_loss = adversary_step(policy, adversary_optimizer, embedding, targets[idx], previous[idx])
+        loss, _ = encoder_policy_step(policy, optimizer, embedding, targets[idx], previous[idx], weight)
         return loss, adversary_loss
 
-    evaluations, ms_per_step = fit(args, policy, optimizer, adversary_optimizer, train_step, len(inputs), seed, device, fast)
+    evaluations, ms_per_step = fit(args, policy, optimizer, adversary_optimizer, lr_ratio, train_step, len(inputs), seed, device, fast)
     return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
 
 
 # (fit is this file's own: it decays the adversary's learning rate too, and logs the adversary's mean error)
-def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
+def fit(args, policy: nn.Module, optimizer, adversary_optimizer, lr_ratio: float, train_step, num_samples: int, seed: int, device, fast: bool) -> tuple:
     """Run train_step(minibatch indices) for --epochs, both learning rates decayed linearly to zero; evaluate every --eval-every
     epochs and after the last. Returns ([(epoch, mean return)], ms per training step)."""
     steps_per_epoch = num_samples // args.batch_size
@@ -208,7 +224,7 @@ def fit(args, policy: nn.Module, optimizer, adversary_optimizer, train_step, num
         epoch_start, adversary_error = time.time(), torch.zeros((), device=device)
         for _ in range(steps_per_epoch):
             set_learning_rate(optimizer, args.learning_rate * (1 - step / total_steps))  # linear decay
-            set_learning_rate(adversary_optimizer, args.adversary_lr * (1 - step / total_steps))
+            set_learning_rate(adversary_optimizer, lr_ratio * args.learning_rate * (1 - step / total_steps))
             idx.copy_(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             loss, adversary_loss = step_fn()
             adversary_error += adversary_loss / steps_per_epoch

@@ -67,14 +67,14 @@ def test_encoder_step_raises_the_adversary_loss_and_adversary_step_lowers_it(see
     before = adversary_loss(policy, history, action, previous)
 
     adversary_weights = snapshot(policy.adversary)
-    bc, adversary = fca.encoder_policy_step(policy, policy_optimizer, history, action, previous, weight=2.0)
+    bc, adversary = fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=2.0)
     assert adversary.item() == pytest.approx(before), "the returned adversary loss is the one before the step"
     assert unchanged(policy.adversary, adversary_weights), "the encoder+policy step must not move D"
     after_encoder = adversary_loss(policy, history, action, previous)
     assert after_encoder > before
 
     encoder_weights, head_weights = snapshot(policy.encoder), snapshot(policy.head)
-    returned = fca.adversary_step(policy, adversary_optimizer, history, action, previous)
+    returned = fca.adversary_step(policy, adversary_optimizer, policy.embed(history), action, previous)
     assert returned.item() == pytest.approx(after_encoder)
     assert unchanged(policy.encoder, encoder_weights) and unchanged(policy.head, head_weights), "the D step must move D only"
     assert adversary_loss(policy, history, action, previous) < after_encoder
@@ -85,7 +85,7 @@ def test_adversary_weight_zero_is_plain_bc_on_the_fca_network():
     policy = small_policy()
     history, action, previous = batch()
     policy_optimizer, _ = optimizers(policy)
-    bc_before, _ = fca.encoder_policy_step(policy, policy_optimizer, history, action, previous, weight=0.0)
+    bc_before, _ = fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=0.0)
     with torch.no_grad():
         assert ((policy(history) - action) ** 2).mean() < bc_before
 
@@ -99,7 +99,51 @@ def test_previous_action_at_an_episode_start_is_the_current_action():
     assert np.array_equal(previous[~starts], actions[np.flatnonzero(~starts) - 1])
 
 
-@pytest.mark.parametrize("flag, value, message", [("--adversary-weight", -1, "must be >= 0"), ("--adversary-lr", 0, "must be positive"),
+def test_the_encoder_is_the_authors_batchnorm_mlp_with_their_init():
+    """gan_mlp.Generator: 3 x [Linear (the first without bias) -> BatchNorm1d -> LeakyReLU(0.2)] -> Linear; weights_init:
+    Xavier-uniform Linear weights, zero biases, BatchNorm scales near 1."""
+    policy = small_policy()
+    kinds = [type(layer).__name__ for layer in policy.encoder]
+    assert kinds == ["Linear", "BatchNorm1d", "LeakyReLU"] * 3 + ["Linear"]
+    linears = [layer for layer in policy.modules() if isinstance(layer, torch.nn.Linear)]
+    assert policy.encoder[0].bias is None and all(layer.bias is not None and not layer.bias.any() for layer in linears[1:])
+    for layer in linears:  # Xavier-uniform: |w| <= sqrt(6 / (fan_in + fan_out)), and it fills most of that range
+        bound = (6 / (layer.in_features + layer.out_features)) ** 0.5
+        assert layer.weight.abs().max() <= bound and layer.weight.abs().max() > 0.9 * bound
+    scales = torch.cat([layer.weight for layer in policy.encoder if isinstance(layer, torch.nn.BatchNorm1d)])
+    assert (scales - 1).abs().max() < 0.1 and scales.std() > 0.005
+
+
+def test_batchnorm_is_frozen_at_evaluation_and_a_reloaded_model_acts_the_same():
+    """Training moves BatchNorm's running statistics, evaluation (eval mode) leaves them, and a model rebuilt from
+    its saved state_dict (as scripts/evaluate.py does, on zero inputs) gives the same actions."""
+    args = fca.Args(encoder_hidden=16, embedding_dim=EMBEDDING, eval_episodes=2)
+    policy = fca.make_policy(args, OBS, ACT, torch.randn(100, OBS * HISTORY))
+    stats = lambda: [buffer.clone() for name, buffer in policy.named_buffers() if "running" in name]
+    before = stats()
+    policy_optimizer, adversary_optimizer = optimizers(policy)
+    for seed in range(3):
+        history, action, previous = batch(seed)
+        fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=1.0)
+    trained = stats()
+    assert not any(torch.equal(a, b) for a, b in zip(before, trained)), "a training step moves the running statistics"
+    policy.eval()
+    fca.evaluate(policy, args, 2, seed=0, device=torch.device("cpu"))
+    assert all(torch.equal(a, b) for a, b in zip(trained, stats())), "evaluation must not move them"
+    history = batch(7, n=5)[0]
+    rebuilt = fca.make_policy(args, OBS, ACT, torch.zeros(2, OBS * HISTORY))
+    rebuilt.load_state_dict(policy.state_dict())
+    assert torch.equal(rebuilt.eval()(history), policy(history))
+    assert not torch.allclose(policy.train()(history), policy.eval()(history)), "in eval mode the running statistics act"
+
+
+def test_the_authors_hopper_setting_and_their_default_elsewhere():
+    assert fca.authors_setting("Hopper-v4", None, None) == (2.0, 2.0)
+    assert fca.authors_setting("Walker2d-v4", None, None) == (1.0, 1.0)
+    assert fca.authors_setting("Hopper-v4", 0.5, 3.0) == (0.5, 3.0)
+
+
+@pytest.mark.parametrize("flag, value, message", [("--adversary-weight", -1, "must be >= 0"), ("--adversary-lr-ratio", 0, "must be positive"),
                                                    ("--encoder-hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive")])
 def test_bad_method_parameters_are_rejected(flag, value, message):
     assert_usage_error(run_in_process("fca.py", flag, value), f"{flag} {message}")
@@ -110,4 +154,5 @@ def test_smoke_run_logs_the_adversary_error(tmp_path):
     progress = [line for line in stdout.splitlines() if "| epoch " in line]
     assert len(progress) == 2 and all("| adversary error " in line for line in progress)
     assert "adversary reference: predicting a_(t-1) = a_t has error" in stdout
-    assert summary["args"]["adversary_weight"] == 1.0 and summary["args"]["adversary_lr"] == 2e-4
+    learning_rate = summary["args"]["learning_rate"]
+    assert f"w = 2; learning rates: G and F {learning_rate:g}, D {2 * learning_rate:g}" in stdout, "Hopper: the authors' Hopper command"
