@@ -99,15 +99,12 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
             raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
         return sorted(set(override))
     structure = getattr(env.unwrapped, "observation_structure", None)
-    if structure:  # v5 envs describe their layout
-        start = structure["qpos"]  # positions come first, then the qvel block
-        return list(range(start, start + structure["qvel"]))
-    # the v4 envs' qvel block, from their _get_obs in gymnasium/envs/mujoco/<env>_v4.py
-    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
-    family = env_id.split("-")[0]
-    if family not in known:
+    if structure:  # v5 envs describe their layout: positions first, then the qvel block
+        return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # the v4 envs' _get_obs
+    if env_id.split("-")[0] not in known:
         raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
-    return list(range(*known[family]))
+    return list(range(*known[env_id.split("-")[0]]))
 
 
 # Copied from bc_oh.PartialObservation
@@ -121,10 +118,7 @@ class PartialObservation(gym.ObservationWrapper):
 
     def observation(self, obs):
         obs = np.array(obs, dtype=np.float64)
-        if self.hide:
-            obs[self.dims] = 0.0
-        else:
-            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        obs[self.dims] = 0.0 if self.hide else obs[self.dims] + self.rng.normal(0.0, self.std, len(self.dims))
         return obs
 
 
@@ -138,7 +132,7 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
@@ -187,7 +181,7 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     return policy.eval()
 
 
-# Copied from bc_oh.generate_demos
+# Copied from expert_ppo.generate_demos
 def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
     Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
@@ -211,7 +205,7 @@ def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy,
             "final_observations": np.array(final_observations, np.float64)}
 
 
-# Copied from bc_oh.write_atomically
+# Copied from expert_ppo.write_atomically
 def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
@@ -225,7 +219,6 @@ def write_atomically(path: str, write):
             os.remove(tmp)
 
 
-# Copied from bc_oh.demo_meta
 def demo_meta(path: str) -> dict:
     """The JSON meta of a demo file: env_id, source, expert_sha256, num_samples, seed, frame_skip ({} if none)."""
     try:
@@ -239,12 +232,10 @@ def demo_meta(path: str) -> dict:
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
     """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
     action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
-    same_episode = ~episode_starts[1:]
-    step_error = ((actions[1:] - actions[:-1])[same_episode] ** 2).mean(0)
+    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
-# Copied from bc_oh.load_or_generate_demos
 def load_or_generate_demos(args, env: gym.Env) -> dict:
     """The demos of --demos, or the rollout of --expert cached under demos/, made again when the cache was
     recorded at another frame skip or by another expert file (its meta holds the expert's SHA-256)."""
@@ -357,7 +348,8 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 # Copied from bc_oh.mlp
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP."""
-    return nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim))
+    layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
+    return nn.Sequential(*layers)
 
 
 # Copied from bc_oh.Normalizer

@@ -4,12 +4,15 @@
 Train:     python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
 Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
+Demos:     python expert_ppo.py --env Hopper-v4 --make-demos   (demos/Hopper-v4_20000.npz, what the imitation files load)
 Other rate: python expert_ppo.py --env Hopper-v4 --frame-skip 1   (writes runs/expert_ppo/Hopper-v4__1_fs1)
 
 The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_only=True) reads it):
 the actor, the frozen observation-normalisation statistics, the action bounds, env id, frame skip, shapes,
 args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
 """
+import hashlib
+import json
 import os
 import platform
 import random
@@ -88,6 +91,10 @@ class Args:
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: Optional[str] = None
     """with --eval-only: also write the checkpoint, with its evaluated return recorded, to this path"""
+    make_demos: bool = False
+    """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the demonstrations the imitation files load"""
+    num_demo_samples: Optional[int] = None
+    """with --make-demos: demonstration steps; None: the paper's 20000 for Hopper and 10000 otherwise"""
     retarget: bool = False
     """with --eval-only: --checkpoint may be an expert for another version of --env (e.g. Hopper-v4 for Hopper-v5) with the same observation and action shapes; --ship-to then ships it for --env, recording where it came from"""
 
@@ -110,7 +117,7 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has a {type(env.action_space).__name__} action space: imitation here needs continuous actions")
+        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
@@ -217,7 +224,6 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 # Checkpoints
 
 
-# Copied from bc_oh.machine
 def machine() -> dict:
     """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
     cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
@@ -227,7 +233,6 @@ def machine() -> dict:
             "torch": str(torch.__version__), "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
 
 
-# Copied from bc_oh.write_atomically
 def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
@@ -348,6 +353,70 @@ def eval_only(args: Args):
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
+
+
+# ----------------------------------------------------------------------------------------------
+# Demonstrations (--make-demos): the imitation files' input
+
+
+def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
+    Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
+    step's reward, termination and truncation, and each episode's observation after its last step."""
+    env, steps, final_observations = make_env(env_id, frame_skip), [], []
+    obs, _ = env.reset(seed=seed)
+    start = True
+    for step in range(num_samples):
+        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        next_obs, reward, terminated, truncated, _ = env.step(action)
+        truncated = truncated or step == num_samples - 1  # the budget ends the last episode
+        steps.append((obs, action, start, reward, terminated, truncated))
+        obs, start = next_obs, terminated or truncated
+        if start:
+            final_observations.append(next_obs)
+            obs, _ = env.reset()
+    env.close()
+    observations, actions, starts, rewards, terminations, truncations = zip(*steps)
+    return {"observations": np.array(observations, np.float64), "actions": np.array(actions, np.float32), "episode_starts": np.array(starts),
+            "rewards": np.array(rewards, np.float64), "terminations": np.array(terminations), "truncations": np.array(truncations),
+            "final_observations": np.array(final_observations, np.float64)}
+
+
+def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
+    """Where --make-demos writes, and where the imitation files look when --demos is not given."""
+    return f"demos/{env_id}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
+
+
+def make_demos(args: Args):
+    """Roll the expert out (seed 0, one thread: the same arrays the imitation files made before they only loaded them)
+    into demos/, with a meta that names the expert (its SHA-256) and its return. A file already made from the same
+    expert file with the same settings is kept."""
+    native, frame_skip = env_frame_skip(args.env), env_frame_skip(args.env, args.frame_skip)
+    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
+    if num_samples <= 1:
+        raise UsageError(f"--num-demo-samples must be more than 1, got {num_samples}")
+    expert_path, path = args.checkpoint.format(env=args.env), demo_path(args.env, frame_skip, native, num_samples)
+    expert = load_expert(expert_path, args.env)  # one clear line for a missing or wrong checkpoint
+    with open(expert_path, "rb") as file:
+        expert_sha256 = hashlib.sha256(file.read()).hexdigest()
+    checkpoint = torch.load(expert_path, map_location="cpu", weights_only=True)
+    meta = {"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples, "seed": 0,
+            "frame_skip": frame_skip, "expert_return": checkpoint.get("eval_return"), "expert_frame_skip": checkpoint.get("frame_skip", native)}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            made = json.loads(str(data["meta"]))
+    except Exception:  # none yet, or not one of ours: make it
+        made = {}
+    if all(made.get(key) == meta[key] for key in ("env_id", "expert_sha256", "num_samples", "frame_skip")):
+        print(f"{path}: already made from {expert_path} with these settings")
+        return
+    if meta["expert_return"] is None:  # an expert not shipped with --eval-only --ship-to: no return to compare with
+        del meta["expert_return"], meta["expert_frame_skip"]
+    torch.set_num_threads(1)  # as the imitation files rolled it out: the same digits
+    print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+    demos = generate_demos(args.env, frame_skip, expert, num_samples)
+    write_atomically(path, lambda file: np.savez(file, meta=np.array(json.dumps(meta)), **demos))
+    print(f"wrote {path}")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -530,7 +599,10 @@ def train(args: Args):
 if __name__ == "__main__":
     try:
         args = tyro.cli(Args)
-        eval_only(args) if args.eval_only else train(args)
+        if args.make_demos:
+            make_demos(args)
+        else:
+            eval_only(args) if args.eval_only else train(args)
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

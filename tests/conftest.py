@@ -49,16 +49,46 @@ SMOKE_ARGS = ("--epochs", 2, "--eval-every", 1, "--eval-episodes", 2, "--num-dem
 """A tiny budget for a smoke run of an imitation method script (seconds); add --output-dir (and --demos)."""
 
 
-def link_experts(directory):
-    """Symlink REPO_ROOT/experts into `directory` (a smoke run's cwd, where demos/ is cached) and return it."""
+DEMO_CACHE = Path(tempfile.mkdtemp(prefix="copycat-test-demos-"))
+"""One folder of demo files for the whole test session: expert_ppo.py --make-demos writes each once (make_demos)."""
+DEMOS_TESTS_USE = [("Hopper-v4", n, None) for n in (120, 200, 300, 500, 1000)] + [("Hopper-v4", 120, 1), ("Hopper-v4", 300, 1)]
+"""(env, --num-demo-samples, --frame-skip) of the runs the tests make: link_experts provides them all"""
+
+
+def make_demos(env="Hopper-v4", num_samples=300, frame_skip=None) -> Path:
+    """The demo file `expert_ppo.py --env ENV --make-demos --num-demo-samples N [--frame-skip K]` writes, made in this
+    process (the same arrays as the command, in the default numeric mode) into DEMO_CACHE, once a session."""
+    import contextlib
+
+    import expert_ppo
+
+    (DEMO_CACHE / "demos").mkdir(exist_ok=True)
+    if not (DEMO_CACHE / "experts").exists():
+        (DEMO_CACHE / "experts").symlink_to(REPO_ROOT / "experts", target_is_directory=True)
+    args = expert_ppo.Args(env=env, make_demos=True, num_demo_samples=num_samples, frame_skip=frame_skip)
+    native, rate = expert_ppo.env_frame_skip(env), expert_ppo.env_frame_skip(env, frame_skip)
+    path = DEMO_CACHE / expert_ppo.demo_path(env, rate, native, num_samples)
+    if not path.exists():
+        with contextlib.chdir(DEMO_CACHE), contextlib.redirect_stdout(None):
+            expert_ppo.make_demos(args)
+    return path
+
+
+def link_experts(directory, demos=True):
+    """Symlink REPO_ROOT/experts into `directory` (a run's cwd) and, unless demos is False, the session's demo files
+    (DEMOS_TESTS_USE, made by make_demos) as its demos/ folder; return the directory."""
     directory = Path(directory)
     (directory / "experts").symlink_to(REPO_ROOT / "experts", target_is_directory=True)
+    if demos:
+        for env, num_samples, frame_skip in DEMOS_TESTS_USE:
+            make_demos(env, num_samples, frame_skip)
+        (directory / "demos").symlink_to(DEMO_CACHE / "demos", target_is_directory=True)
     return directory
 
 
 def fake_demos(n=256, obs_dim=11, act_dim=3, episode_length=50, seed=0):
     """Random demos shaped like Hopper-v4's (obs 11, action 3), episodes of `episode_length` steps:
-    a dict as load_or_generate_demos returns, for fast in-process training tests."""
+    a dict as load_demos returns, for fast in-process training tests."""
     import numpy as np
 
     rng = np.random.default_rng(seed)

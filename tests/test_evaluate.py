@@ -56,9 +56,12 @@ def test_a_saved_model_replays_its_runs_last_evaluation_exactly(trained, method)
 
 
 def test_dagger_s_final_score_is_three_evaluations_on_consecutive_episodes(trained):
+    """Each of the three replays has the shape of the run's own evaluations (2 episodes in one batch), so it matches
+    bit for bit on any CPU. One replay of all 6 episodes at once would not: MKL's default mode picks its kernels by
+    matrix size too, so a batch of 6 rounds differently from one of 2 (they agreed only to 1e-7 on an AMD EPYC)."""
     path, summary = trained("dagger")
-    _, returns = evaluate(path, "--episodes", 6, "--seed", LAST_SEED["dagger"] - 4)
-    assert np.mean(returns) == pytest.approx(summary["scores"]["1"]["score"], rel=1e-12)
+    means = [np.mean(evaluate(path, "--episodes", 2, "--seed", LAST_SEED["dagger"] - offset)[1]) for offset in (4, 2, 0)]
+    assert float(np.mean(means)) == summary["scores"]["1"]["score"]
 
 
 def test_the_defaults_are_the_runs_episode_count_from_seed_0_and_the_settings_are_named(trained, tmp_path):
