@@ -251,6 +251,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         model = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"]}
         model.update(act_dim=result["act_dim"], state_dict=result["policy"].cpu().state_dict())
         path = os.path.join(output_dir, f"seed{seed}.pt")
+        os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
         os.replace(f"{path}.tmp", path)  # written, then renamed: an interrupted run leaves no half checkpoint
     write_result(os.path.join(output_dir, f"result_seeds{seed}.json"), args, output_dir, {seed: entry})  # a rerun keeps
@@ -426,7 +427,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

@@ -211,12 +211,38 @@ def shown_command(cmd: list) -> list:
 
 
 def machine() -> dict:
-    """The method files' record of where a run was made (bc_oh.machine), for the first lines of a grid's log."""
-    if str(REPO_ROOT) not in sys.path:
-        sys.path.insert(0, str(REPO_ROOT))
-    from bc_oh import machine as method_files_machine  # here: importing torch and gymnasium is slow
+    """Where a run was made (benchmark.machine): the second line of its log, and a field of its result."""
+    from benchmark.machine import machine as record  # here: importing torch and gymnasium is slow
 
-    return method_files_machine()
+    return record()
+
+
+def demo_commands(runs: list, options: Options) -> list:
+    """The `expert_ppo.py --make-demos` commands that make the demo files the grid's method runs load (each is cheap when
+    its file is already made from the same expert): one per env, at the --frame-skip and --num-demo-samples asked for."""
+    wanted = [word for flag in ("--frame-skip", "--num-demo-samples") if flag in options.extra_args
+              for word in options.extra_args[options.extra_args.index(flag):][:2]]
+    if "--demos" in options.extra_args:  # the grid's own demo file: nothing to make
+        return []
+    envs = sorted({run.env for run in runs if run.method != EXPERT})
+    return [[sys.executable, "expert_ppo.py", "--env", env, "--make-demos", *wanted] for env in envs]
+
+
+def make_demos(runs: list, options: Options):
+    """Make the demos the grid needs before any run starts, in the scripts folder (one clear line if that fails)."""
+    for cmd in demo_commands(runs, options):
+        made = subprocess.run(cmd, cwd=options.scripts_dir, capture_output=True, text=True)
+        if made.returncode != 0:
+            raise UsageError(f"could not make the demos ({shlex.join(shown_command(cmd))}): {last_line_of(made.stderr or made.stdout)}")
+        print(made.stdout.strip().splitlines()[-1], flush=True)
+
+
+def add_machine(run: Run, options: Options):
+    """Record in a method run's result where it was made (the method files leave that to the harness)."""
+    path = result_path(options.results_dir, run.method, run.env, [run.seed])
+    result = json.loads(path.read_text())
+    result["machine"] = machine()
+    write_text(path, json.dumps(result, indent=1))
 
 
 def why_not_done(run: Run, options: Options):
@@ -247,7 +273,11 @@ def write_expert_result(run: Run, options: Options, output: str):
 
 
 def last_line(path: Path) -> str:
-    lines = [line.strip() for line in path.read_text(errors="replace").splitlines() if line.strip()]
+    return last_line_of(path.read_text(errors="replace"))
+
+
+def last_line_of(text: str) -> str:
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
     return lines[-1][:200] if lines else "(empty log)"
 
 
@@ -296,7 +326,9 @@ def execute(run: Run, options: Options, processes: Processes):
     try:
         if run.method == EXPERT:
             write_expert_result(run, options, log.read_text())
-    except ResultError as error:
+        else:
+            add_machine(run, options)
+    except (ResultError, OSError, ValueError) as error:
         return f"{error} (log: {log})"
     reason = why_not_done(run, options)
     return None if reason is None else f"exited 0 but left no valid result: {reason} (log: {log})"
@@ -391,6 +423,7 @@ def main(argv=None) -> int:
           + ("" if options.dry_run else f" on {options.workers} workers"), flush=True)
     if options.dry_run or not todo:
         return 0
+    make_demos(todo, options)
     failures = run_all(todo, options)
     if failures:
         print(f"\n{len(failures)} of {len(todo)} runs failed:")
