@@ -10,6 +10,7 @@ points on the same episodes, so the per-seed table and the JSON show what averag
 
     python average_ensemble.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -119,7 +120,7 @@ class CurrentFramePolicy(nn.Module):
         self.net = mlp(obs_dim, act_dim, hidden)
 
     def forward(self, obs_history):
-        return self.net(self.normalize(obs_history[:, -self.obs_dim:]))
+        return self.net(self.normalize(obs_history[:, -self.obs_dim :]))
 
 
 class AverageEnsemble(nn.Module):
@@ -148,22 +149,39 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    noisy = partially_observe(
+        demos["observations"],
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        seed,
+    )
+    inputs = torch.as_tensor(
+        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
+    )
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         losses = {name: ((member(inputs[idx]) - targets[idx]) ** 2).mean() for name, member in policy.members.items()}
-        loss = sum(losses.values())  # of both members; disjoint parameters, per-parameter Adam: each trains exactly as if alone
+        loss = sum(
+            losses.values()
+        )  # of both members; disjoint parameters, per-parameter Adam: each trains exactly as if alone
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return losses
 
     evaluations, member_evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return {"evaluations": evaluations, "member_evaluations": member_evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+    return {
+        "evaluations": evaluations,
+        "member_evaluations": member_evaluations,
+        "policy": policy,
+        "obs_dim": obs_dim,
+        "act_dim": act_dim,
+        "ms_per_step": ms_per_step,
+    }
 
 
 # (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
@@ -181,13 +199,20 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
                 group["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
             losses = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
-        loss_text = ", ".join(f"{name} {value.item():.5f}" for name, value in losses.items())  # .item() waits for the GPU
+        loss_text = ", ".join(
+            f"{name} {value.item():.5f}" for name, value in losses.items()
+        )  # .item() waits for the GPU
         train_time += time.time() - epoch_start
         if epoch % args.eval_every == 0 or epoch == args.epochs:
             policy.eval()
-            for name, member in {"ensemble": policy, **policy.members}.items():  # the members on the ensemble's episodes
+            for name, member in {
+                "ensemble": policy,
+                **policy.members,
+            }.items():  # the members on the ensemble's episodes
                 returns = evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)
-                (evaluations if name == "ensemble" else member_evaluations[name]).append((epoch, float(np.mean(returns))))
+                (evaluations if name == "ensemble" else member_evaluations[name]).append(
+                    (epoch, float(np.mean(returns)))
+                )
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
@@ -270,8 +295,14 @@ def run(args):
     write_result(result_path, args, output_dir, per_seed, members=member_scores)
     print(f"\n{'seed':>6} | {'ensemble':>8}" + "".join(f" | {member:>8}" for member in member_scores))
     for seed, entry in per_seed.items():
-        print(f"{seed:>6} | {entry['score']:8.1f}" + "".join(f" | {entry['members'][m]['score']:8.1f}" for m in member_scores))
-    print("members: " + ", ".join(f"{m} {values['mean']:.1f} ± {values['std']:.1f}" for m, values in member_scores.items()))
+        print(
+            f"{seed:>6} | {entry['score']:8.1f}"
+            + "".join(f" | {entry['members'][m]['score']:8.1f}" for m in member_scores)
+        )
+    print(
+        "members: "
+        + ", ".join(f"{m} {values['mean']:.1f} ± {values['std']:.1f}" for m, values in member_scores.items())
+    )
     print(f"result: {result_path}\n{summary_line(args, [entry['score'] for entry in per_seed.values()], meta)}")
 
 
@@ -464,7 +495,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

@@ -8,6 +8,7 @@ frame of the stack, so --history does not change the result.
 
     python bc_so.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -103,7 +104,7 @@ class Policy(nn.Module):
         self.net = mlp(obs_dim, act_dim, hidden)
 
     def forward(self, obs_history):
-        return self.net(self.normalize(obs_history[:, -self.obs_dim:]))
+        return self.net(self.normalize(obs_history[:, -self.obs_dim :]))
 
 
 # Copied from bc_oh.make_policy
@@ -427,7 +428,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

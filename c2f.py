@@ -10,6 +10,7 @@ of the paper's Table 3; each changes only what it names.
     python c2f.py --env Hopper-v4
     python c2f.py --env Hopper-v4 --fusion early --no-stop-gradient   # ablations
 """
+
 import json
 import multiprocessing
 import os
@@ -126,7 +127,7 @@ class Policy(nn.Module):
 
     def coarse_model(self, obs_history):
         """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
-        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.obs_dim:])
+        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.obs_dim :])
         return self.coarse[-1](feature), feature
 
     def coarse_and_final(self, obs_history):
@@ -150,19 +151,31 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 def train_seed(args, demos: dict, seed: int, device) -> dict:
     """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
     if args.two_stage and not args.coarse_action:
-        raise UsageError("--two-stage trains the coarse model first, --no-coarse-action never uses it: pass one of them")
+        raise UsageError(
+            "--two-stage trains the coarse model first, --no-coarse-action never uses it: pass one of them"
+        )
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    noisy = partially_observe(
+        demos["observations"],
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        seed,
+    )
+    inputs = torch.as_tensor(
+        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
+    )
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     if args.two_stage:  # Table 3's two-stage training: first the coarse model alone, then frozen
         train_coarse_alone(args, policy, inputs, targets, seed, device)
     optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad], lr=args.learning_rate)
 
-    def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (with --two-stage the final loss alone)
+    def train_step(
+        idx,
+    ):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (with --two-stage the final loss alone)
         zeta, action = policy.coarse_and_final(inputs[idx])
         loss = ((action - targets[idx]) ** 2).mean()
         if not args.two_stage and args.coarse_action:
@@ -173,7 +186,13 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         return loss
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+    return {
+        "evaluations": evaluations,
+        "policy": policy,
+        "obs_dim": obs_dim,
+        "act_dim": act_dim,
+        "ms_per_step": ms_per_step,
+    }
 
 
 def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device):
@@ -196,7 +215,14 @@ def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torc
 
 # ---- Table 3's ablations, and the capacity controls: each flag changes only what it names ----
 
-PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True)
+PAPER_FLAGS = dict(
+    fusion="late",
+    coarse_output="action",
+    coarse_input="current",
+    policy_input="history",
+    stop_gradient=True,
+    coarse_action=True,
+)
 """the model flags of Args at the paper's values (--two-stage changes the training, not the model)"""
 
 
@@ -205,11 +231,28 @@ class Table3Policy(nn.Module):
     same seed gives the same initial weights) and computes the same outputs. penultimate = BC-OH's own two-hidden-
     layer MLP with sg(zeta) joined before its last layer; coarse_action=False feeds zeros instead of sg(zeta)."""
 
-    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
-                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True):
+    def __init__(
+        self,
+        obs_dim: int,
+        act_dim: int,
+        history: int,
+        hidden: int,
+        inputs: torch.Tensor,
+        fusion="late",
+        coarse_output="action",
+        coarse_input="current",
+        policy_input="history",
+        stop_gradient=True,
+        coarse_action=True,
+    ):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
+        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = (
+            obs_dim,
+            fusion,
+            coarse_output,
+            stop_gradient,
+        )
         self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
@@ -221,13 +264,15 @@ class Table3Policy(nn.Module):
         elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
-            self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+            self.policy_rest = nn.Sequential(
+                nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+            )
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
 
     def pick(self, x, which: str):
         """The normalised history itself, or its last frame o_t."""
-        return x if which == "history" else x[:, -self.obs_dim:]
+        return x if which == "history" else x[:, -self.obs_dim :]
 
     def coarse_model(self, obs_history):
         feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
@@ -538,7 +583,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

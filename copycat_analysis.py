@@ -154,14 +154,18 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net = nn.Sequential(
+            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
+        )
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[..., : len(self.obs_mean)]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[
+            ..., : len(self.obs_mean)
+        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -170,19 +174,25 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
+        raise UsageError(
+            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+        )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+        raise UsageError(
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+        )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
     return policy.eval()
 
 
 # Copied from expert_ppo.generate_demos
-def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+def generate_demos(
+    env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0
+) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
     Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
     step's reward, termination and truncation, and each episode's observation after its last step."""
@@ -200,9 +210,15 @@ def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy,
             obs, _ = env.reset()
     env.close()
     observations, actions, starts, rewards, terminations, truncations = zip(*steps)
-    return {"observations": np.array(observations, np.float64), "actions": np.array(actions, np.float32), "episode_starts": np.array(starts),
-            "rewards": np.array(rewards, np.float64), "terminations": np.array(terminations), "truncations": np.array(truncations),
-            "final_observations": np.array(final_observations, np.float64)}
+    return {
+        "observations": np.array(observations, np.float64),
+        "actions": np.array(actions, np.float32),
+        "episode_starts": np.array(starts),
+        "rewards": np.array(rewards, np.float64),
+        "terminations": np.array(terminations),
+        "truncations": np.array(truncations),
+        "final_observations": np.array(final_observations, np.float64),
+    }
 
 
 # Copied from expert_ppo.write_atomically
@@ -376,7 +392,7 @@ class SOPolicy(nn.Module):
         self.net = mlp(obs_dim, act_dim, hidden)
 
     def forward(self, obs_history):
-        return self.net(self.normalize(obs_history[:, -self.obs_dim:]))
+        return self.net(self.normalize(obs_history[:, -self.obs_dim :]))
 
 
 # Copied from bc_oh.Policy with Policy->OHPolicy
@@ -398,11 +414,28 @@ class C2FPolicy(nn.Module):
     same seed gives the same initial weights) and computes the same outputs. penultimate = BC-OH's own two-hidden-
     layer MLP with sg(zeta) joined before its last layer; coarse_action=False feeds zeros instead of sg(zeta)."""
 
-    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor, fusion="late",
-                 coarse_output="action", coarse_input="current", policy_input="history", stop_gradient=True, coarse_action=True):
+    def __init__(
+        self,
+        obs_dim: int,
+        act_dim: int,
+        history: int,
+        hidden: int,
+        inputs: torch.Tensor,
+        fusion="late",
+        coarse_output="action",
+        coarse_input="current",
+        policy_input="history",
+        stop_gradient=True,
+        coarse_action=True,
+    ):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = obs_dim, fusion, coarse_output, stop_gradient
+        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = (
+            obs_dim,
+            fusion,
+            coarse_output,
+            stop_gradient,
+        )
         self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
@@ -414,13 +447,15 @@ class C2FPolicy(nn.Module):
         elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
-            self.policy_rest = nn.Sequential(nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+            self.policy_rest = nn.Sequential(
+                nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+            )
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
 
     def pick(self, x, which: str):
         """The normalised history itself, or its last frame o_t."""
-        return x if which == "history" else x[:, -self.obs_dim:]
+        return x if which == "history" else x[:, -self.obs_dim :]
 
     def coarse_model(self, obs_history):
         feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))

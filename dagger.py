@@ -11,6 +11,7 @@ expert online; the extra labels over all rounds are --dagger-samples (the paper'
 
     python dagger.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -96,10 +97,14 @@ def check_dagger_args(args):
     if args.dagger_beta_rounds is not None and args.dagger_beta_rounds <= 0:
         raise UsageError(f"--dagger-beta-rounds must be positive, got {args.dagger_beta_rounds}")
     if args.dagger_samples < args.dagger_rounds:
-        raise UsageError(f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds {args.dagger_rounds}: raise --dagger-samples or lower --dagger-rounds")
+        raise UsageError(
+            f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds {args.dagger_rounds}: raise --dagger-samples or lower --dagger-rounds"
+        )
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
-        raise UsageError(f"no expert for {args.env} at {expert_path}: DAgger labels states with the expert online; pass --expert with a checkpoint from expert_ppo.py")
+        raise UsageError(
+            f"no expert for {args.env} at {expert_path}: DAgger labels states with the expert online; pass --expert with a checkpoint from expert_ppo.py"
+        )
     load_expert(expert_path, args.env)  # fails now, not after round 0, if it is not an expert for this env
 
 
@@ -152,23 +157,37 @@ def dagger_beta(round_number: int, beta_rounds: int) -> float:
 
 
 @torch.no_grad()
-def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng: np.random.Generator, device) -> dict:
+def collect_round(
+    policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng: np.random.Generator, device
+) -> dict:
     """Roll out the beta-mix of expert and learner in the partially observed env for num_labels steps; at every visited
     state record the noisy history the learner saw (inputs), the clean observation and the expert's action
     on it (labels), and whether the expert acted. Episodes cut by the budget end early."""
     env = make_env(args.env, args.frame_skip)
-    noise = PartialObservation(env, velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, int(rng.integers(2**31)))
+    noise = PartialObservation(
+        env,
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        int(rng.integers(2**31)),
+    )
     low, high = env.action_space.low, env.action_space.high
     clean, _ = env.reset(seed=int(rng.integers(2**31)))  # the raw env: noise.observation adds the noise by hand
     frames, new_episode = None, True
     record = {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
     for _ in range(num_labels):
-        observed = noise.observation(clean)[None]  # the last H frames, an episode's first one repeated (stack_history's rule)
+        observed = noise.observation(clean)[
+            None
+        ]  # the last H frames, an episode's first one repeated (stack_history's rule)
         frames = np.repeat(observed, args.history, axis=0) if new_episode else np.concatenate([frames[1:], observed])
         history = frames.reshape(1, -1)
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         expert_acts = rng.random() < beta
-        action = label if expert_acts else policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy().clip(low, high)
+        action = (
+            label
+            if expert_acts
+            else policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy().clip(low, high)
+        )
         for key, value in zip(record, (history[0].astype(np.float32), clean, label, expert_acts)):
             record[key].append(value)
         clean, _, terminated, truncated, _ = env.step(action)
@@ -186,11 +205,21 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    noisy = partially_observe(
+        demos["observations"],
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        seed,
+    )
+    inputs = torch.as_tensor(
+        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
+    )
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)  # the normaliser keeps the demos' statistics
-    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)  # one optimiser, its moments kept over rounds
+    optimizer = torch.optim.Adam(
+        policy.parameters(), lr=args.learning_rate
+    )  # one optimiser, its moments kept over rounds
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()  # inputs, targets: the aggregate of the rounds so far
@@ -199,9 +228,21 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         optimizer.step()
         return loss
 
-    expert, rollout_rng, rounds, collected, evaluations = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed), [], [], []
+    expert, rollout_rng, rounds, collected, evaluations = (
+        load_expert(args.expert.format(env=args.env), args.env),
+        np.random.default_rng(seed),
+        [],
+        [],
+        [],
+    )
     generator = torch.Generator(device=device).manual_seed(seed)  # one minibatch stream through all rounds
-    progress = {"epoch": 0, "epochs": args.epochs + args.dagger_rounds * args.dagger_epochs, "start": time.time(), "train_time": 0.0, "steps": 0}
+    progress = {
+        "epoch": 0,
+        "epochs": args.epochs + args.dagger_rounds * args.dagger_epochs,
+        "start": time.time(),
+        "train_time": 0.0,
+        "steps": 0,
+    }
     for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
         if round_number > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
             beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
@@ -211,18 +252,58 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             collected.append(data)
             inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
             targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
-            rounds.append({"round": round_number, "beta": beta, "labels": num_labels, "expert_fraction": float(data["expert_acted"].mean()), "aggregate": len(inputs)})
-        fit(args, policy, optimizer, train_step, len(inputs), seed, device, round_number, generator, progress, evaluations)
+            rounds.append(
+                {
+                    "round": round_number,
+                    "beta": beta,
+                    "labels": num_labels,
+                    "expert_fraction": float(data["expert_acted"].mean()),
+                    "aggregate": len(inputs),
+                }
+            )
+        fit(
+            args,
+            policy,
+            optimizer,
+            train_step,
+            len(inputs),
+            seed,
+            device,
+            round_number,
+            generator,
+            progress,
+            evaluations,
+        )
         if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim,
-            "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data, "ms_per_step": 1000 * progress["train_time"] / progress["steps"]}
+    return {
+        "evaluations": evaluations,
+        "policy": policy,
+        "obs_dim": obs_dim,
+        "act_dim": act_dim,
+        "bc_oh_score": bc_oh_score,
+        "rounds": rounds,
+        "dagger_data": dagger_data,
+        "ms_per_step": 1000 * progress["train_time"] / progress["steps"],
+    }
 
 
 # (fit is this file's own: it trains one round, numbering epochs on from the rounds before (the evaluation seeds, the log),
 # draws minibatches from the one generator of all rounds, and evaluates the final learner three times)
-def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, round_number: int, generator, progress, evaluations):
+def fit(
+    args,
+    policy,
+    optimizer,
+    train_step,
+    num_samples: int,
+    seed: int,
+    device,
+    round_number: int,
+    generator,
+    progress,
+    evaluations,
+):
     """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to zero; evaluate every
     --eval-every epochs and after the round's last, appending (epoch, mean return) to evaluations; progress counts rounds."""
     epochs = args.dagger_epochs if round_number else args.epochs
@@ -237,12 +318,19 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
-        progress["train_time"], progress["steps"] = progress["train_time"] + time.time() - epoch_start, progress["steps"] + steps_per_epoch
+        progress["train_time"], progress["steps"] = (
+            progress["train_time"] + time.time() - epoch_start,
+            progress["steps"] + steps_per_epoch,
+        )
         if epoch % args.eval_every == 0 or round_epoch == epochs:
             policy.eval()
-            final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 disjoint evaluations
+            final = (
+                round_number == args.dagger_rounds and round_epoch == epochs
+            )  # the final learner: 3 disjoint evaluations
             for k in range(3 if final else 1):
-                returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device)
+                returns = evaluate(
+                    policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device
+                )
                 evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
         if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, progress["epochs"] // 20) == 0:
@@ -498,14 +586,18 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net = nn.Sequential(
+            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
+        )
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[..., : len(self.obs_mean)]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[
+            ..., : len(self.obs_mean)
+        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -514,12 +606,16 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
+        raise UsageError(
+            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+        )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+        raise UsageError(
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+        )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
     return policy.eval()
@@ -550,7 +646,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

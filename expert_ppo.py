@@ -11,6 +11,7 @@ The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_o
 the actor, the frozen observation-normalisation statistics, the action bounds, env id, frame skip, shapes,
 args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
 """
+
 import hashlib
 import json
 import os
@@ -32,7 +33,9 @@ import tyro
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
 # gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
 # ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
-mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
+mujoco.set_mju_user_warning(
+    lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr)
+)
 
 
 @dataclass
@@ -150,7 +153,9 @@ class RunningMeanStd:
         batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
         delta, total = batch_mean - self.mean, self.count + batch_count
         self.mean = self.mean + delta * batch_count / total
-        self.var = (self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total) / total
+        self.var = (
+            self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total
+        ) / total
         self.count = total
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
@@ -194,14 +199,18 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim))
+        self.net = nn.Sequential(
+            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
+        )
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[..., : len(self.obs_mean)]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[
+            ..., : len(self.obs_mean)
+        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -209,12 +218,16 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
-        raise UsageError(f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one")
+        raise UsageError(
+            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+        )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py")
+        raise UsageError(
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+        )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
     return policy.eval()
@@ -228,9 +241,16 @@ def machine() -> dict:
     """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
     cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
     cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
-    return {"cpu": cpu[1] if cpu else platform.processor(), "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-            "MKL_CBWR": os.environ.get("MKL_CBWR"), "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
-            "torch": str(torch.__version__), "numpy": np.__version__, "mujoco": mujoco.__version__, "gymnasium": gym.__version__}
+    return {
+        "cpu": cpu[1] if cpu else platform.processor(),
+        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "MKL_CBWR": os.environ.get("MKL_CBWR"),
+        "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+        "torch": str(torch.__version__),
+        "numpy": np.__version__,
+        "mujoco": mujoco.__version__,
+        "gymnasium": gym.__version__,
+    }
 
 
 def write_atomically(path: str, write):
@@ -309,7 +329,9 @@ def retargeted_expert(path: str, env_id: str):
     observations = (env.observation_space.shape[0], structure.get("qpos", 0) + structure.get("qvel", 0))
     shapes = policy.net[0].in_features in observations and policy.net[-1].out_features == env.action_space.shape[0]
     if made_for.split("-")[0] != env_id.split("-")[0] or not shapes:
-        raise UsageError(f"{path} is an expert for {made_for}, another env or other observation and action shapes than {env_id}'s: train one for {env_id}")
+        raise UsageError(
+            f"{path} is an expert for {made_for}, another env or other observation and action shapes than {env_id}'s: train one for {env_id}"
+        )
     return policy, made_for
 
 
@@ -330,8 +352,10 @@ def eval_only(args: Args):
         raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
     recorded = checkpoint_env(path)
     if not args.retarget and recorded not in (None, args.env) and recorded.split("-")[0] == args.env.split("-")[0]:
-        raise UsageError(f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} "
-                         f"(and --ship-to to ship it there), or a checkpoint made for {args.env}")
+        raise UsageError(
+            f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} "
+            f"(and --ship-to to ship it there), or a checkpoint made for {args.env}"
+        )
     # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
     policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
@@ -340,14 +364,20 @@ def eval_only(args: Args):
     trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
     if args.ship_to and frame_skip != trained_at:  # the shipped return must be the one of the expert's own rate
-        raise UsageError(f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, drop --frame-skip {frame_skip} or --ship-to")
+        raise UsageError(
+            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, drop --frame-skip {frame_skip} or --ship-to"
+        )
     if frame_skip != native:  # said only at another rate, so that the default output stays as it was
-        print(f"evaluating at frame skip {frame_skip} (the env's own is {native}; the checkpoint was trained at {trained_at})")
+        print(
+            f"evaluating at frame skip {frame_skip} (the env's own is {native}; the checkpoint was trained at {trained_at})"
+        )
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
     if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
-        checkpoint.update(eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns))
+        checkpoint.update(
+            eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns)
+        )
         if made_for != args.env:  # shipped for --env: load_expert accepts it there, and it says where it came from
             checkpoint.update(env_id=args.env, retargeted_from=made_for)
         save_atomically(checkpoint, args.ship_to)
@@ -359,7 +389,9 @@ def eval_only(args: Args):
 # Demonstrations (--make-demos): the imitation files' input
 
 
-def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
+def generate_demos(
+    env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0
+) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
     Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
     step's reward, termination and truncation, and each episode's observation after its last step."""
@@ -377,9 +409,15 @@ def generate_demos(env_id: str, frame_skip: Optional[int], expert: ExpertPolicy,
             obs, _ = env.reset()
     env.close()
     observations, actions, starts, rewards, terminations, truncations = zip(*steps)
-    return {"observations": np.array(observations, np.float64), "actions": np.array(actions, np.float32), "episode_starts": np.array(starts),
-            "rewards": np.array(rewards, np.float64), "terminations": np.array(terminations), "truncations": np.array(truncations),
-            "final_observations": np.array(final_observations, np.float64)}
+    return {
+        "observations": np.array(observations, np.float64),
+        "actions": np.array(actions, np.float32),
+        "episode_starts": np.array(starts),
+        "rewards": np.array(rewards, np.float64),
+        "terminations": np.array(terminations),
+        "truncations": np.array(truncations),
+        "final_observations": np.array(final_observations, np.float64),
+    }
 
 
 def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
@@ -400,8 +438,16 @@ def make_demos(args: Args):
     with open(expert_path, "rb") as file:
         expert_sha256 = hashlib.sha256(file.read()).hexdigest()
     checkpoint = torch.load(expert_path, map_location="cpu", weights_only=True)
-    meta = {"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples, "seed": 0,
-            "frame_skip": frame_skip, "expert_return": checkpoint.get("eval_return"), "expert_frame_skip": checkpoint.get("frame_skip", native)}
+    meta = {
+        "env_id": args.env,
+        "source": expert_path,
+        "expert_sha256": expert_sha256,
+        "num_samples": num_samples,
+        "seed": 0,
+        "frame_skip": frame_skip,
+        "expert_return": checkpoint.get("eval_return"),
+        "expert_frame_skip": checkpoint.get("frame_skip", native),
+    }
     try:
         with np.load(path, allow_pickle=False) as data:
             made = json.loads(str(data["meta"]))
@@ -424,7 +470,19 @@ def make_demos(args: Args):
 
 
 def validate(args: Args):
-    for name in ("total_timesteps", "num_envs", "num_steps", "num_minibatches", "update_epochs", "hidden", "save_every_steps", "eval_every_steps", "train_eval_episodes", "eval_episodes", "threads"):
+    for name in (
+        "total_timesteps",
+        "num_envs",
+        "num_steps",
+        "num_minibatches",
+        "update_epochs",
+        "hidden",
+        "save_every_steps",
+        "eval_every_steps",
+        "train_eval_episodes",
+        "eval_episodes",
+        "threads",
+    ):
         if getattr(args, name) <= 0:
             raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     for name in ("learning_rate", "clip_coef", "max_grad_norm"):
@@ -454,7 +512,8 @@ def train(args: Args):
     # observation in info["final_obs"]; so every stored transition belongs to one episode, and a
     # truncated episode can be bootstrapped from V(final_obs).
     envs = gym.vector.SyncVectorEnv(
-        [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
+        [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)],
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     obs_dim, act_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = Agent(obs_dim, act_dim, args.hidden)
@@ -473,7 +532,9 @@ def train(args: Args):
         # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
         if trained_at != args.frame_skip:
-            raise UsageError(f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --output-dir")
+            raise UsageError(
+                f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --output-dir"
+            )
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
@@ -481,8 +542,16 @@ def train(args: Args):
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
         # state["args"] is a record only, never read back: checkpoints written under older flag names
         # (run_dir, eval_every, save_every) resume, and the run goes on with the flags given now.
-        obs_rms.mean, obs_rms.var, obs_rms.count = state["obs_mean"].numpy(), state["obs_var"].numpy(), state["obs_count"]
-        ret_rms.mean, ret_rms.var, ret_rms.count = state["ret_mean"].numpy(), state["ret_var"].numpy(), state["ret_count"]
+        obs_rms.mean, obs_rms.var, obs_rms.count = (
+            state["obs_mean"].numpy(),
+            state["obs_var"].numpy(),
+            state["obs_count"],
+        )
+        ret_rms.mean, ret_rms.var, ret_rms.count = (
+            state["ret_mean"].numpy(),
+            state["ret_var"].numpy(),
+            state["ret_count"],
+        )
         global_step, best_return = state["global_step"], state["best_return"]
         print(f"resumed from {latest_path} at step {global_step}")
     elif args.resume:
@@ -516,7 +585,9 @@ def train(args: Args):
             obs = torch.as_tensor(obs_rms.normalize(raw_obs), dtype=torch.float32)
             with torch.no_grad():
                 action, logp, _, value = agent.action_and_value(obs)
-            raw_obs, reward, terminated, truncated, info = envs.step(action.numpy().clip(envs.single_action_space.low, envs.single_action_space.high))
+            raw_obs, reward, terminated, truncated, info = envs.step(
+                action.numpy().clip(envs.single_action_space.low, envs.single_action_space.high)
+            )
             global_step += args.num_envs
             episode_return += reward
             episode_length += 1
@@ -526,9 +597,13 @@ def train(args: Args):
             scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
             done = terminated | truncated
             if truncated.any():  # time limit, not death: bootstrap from the value of the last observation
-                final_obs = np.stack([info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)])
+                final_obs = np.stack(
+                    [info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)]
+                )
                 with torch.no_grad():
-                    final_value = agent.value(torch.as_tensor(obs_rms.normalize(final_obs), dtype=torch.float32)).numpy()
+                    final_value = agent.value(
+                        torch.as_tensor(obs_rms.normalize(final_obs), dtype=torch.float32)
+                    ).numpy()
                 scaled_reward = scaled_reward + args.gamma * final_value * (truncated & ~terminated)
             for i in np.flatnonzero(done):
                 recent_returns = (recent_returns + [episode_return[i]])[-20:]
@@ -551,7 +626,12 @@ def train(args: Args):
 
         # ---- PPO update
         b_obs, b_act = obs_buf.reshape(-1, obs_dim), act_buf.reshape(-1, act_dim)
-        b_logp, b_adv, b_ret, b_val = logp_buf.reshape(-1), advantages.reshape(-1), returns.reshape(-1), val_buf.reshape(-1)
+        b_logp, b_adv, b_ret, b_val = (
+            logp_buf.reshape(-1),
+            advantages.reshape(-1),
+            returns.reshape(-1),
+            val_buf.reshape(-1),
+        )
         for _ in range(args.update_epochs):
             for idx in torch.randperm(batch_size).split(minibatch_size):
                 _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
@@ -570,11 +650,26 @@ def train(args: Args):
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
-        print(f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
+        print(
+            f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min",
+            flush=True,
+        )
         if global_step >= next_eval:
             next_eval += args.eval_every_steps
-            eval_return = float(np.mean(evaluate(frozen_policy(), args.env, args.train_eval_episodes, seed=args.seed + global_step, frame_skip=args.frame_skip)))
-            print(f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True)
+            eval_return = float(
+                np.mean(
+                    evaluate(
+                        frozen_policy(),
+                        args.env,
+                        args.train_eval_episodes,
+                        seed=args.seed + global_step,
+                        frame_skip=args.frame_skip,
+                    )
+                )
+            )
+            print(
+                f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True
+            )
             if eval_return > best_return:
                 best_return = eval_return
                 save_atomically(checkpoint(eval_return), best_path)
@@ -588,7 +683,9 @@ def train(args: Args):
     save_atomically(checkpoint(), latest_path)
     envs.close()
     if stopped_early:
-        print(f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume")
+        print(
+            f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume"
+        )
         return
     returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip)
     save_atomically(checkpoint(float(np.mean(returns))), latest_path)

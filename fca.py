@@ -9,6 +9,7 @@ MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}).
 
     python fca.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -77,7 +78,9 @@ class Args:
 
     def __post_init__(self):
         if self.adversary_weight is not None and not self.adversary_weight >= 0:
-            raise UsageError(f"--adversary-weight must be >= 0, got {self.adversary_weight}: 0 gives BC-OH on the FCA network")
+            raise UsageError(
+                f"--adversary-weight must be >= 0, got {self.adversary_weight}: 0 gives BC-OH on the FCA network"
+            )
         for name in ("adversary_lr_ratio", "encoder_hidden", "embedding_dim"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
@@ -125,9 +128,18 @@ class Policy(nn.Module):
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, embedding_dim: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.encoder = nn.Sequential(nn.Linear(obs_dim * history, hidden, bias=False), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2),
-                                     nn.Linear(hidden, hidden), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2),
-                                     nn.Linear(hidden, hidden), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, embedding_dim))
+        self.encoder = nn.Sequential(
+            nn.Linear(obs_dim * history, hidden, bias=False),
+            nn.BatchNorm1d(hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(hidden, hidden),
+            nn.BatchNorm1d(hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(hidden, hidden),
+            nn.BatchNorm1d(hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(hidden, embedding_dim),
+        )
         self.head = head(embedding_dim, act_dim, hidden)
         self.adversary = head(embedding_dim + act_dim, act_dim, hidden)  # conditioned on the true a_t
         self.apply(authors_init)
@@ -175,7 +187,9 @@ def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous,
 def authors_setting(env_id: str, weight: Optional[float], lr_ratio: Optional[float]) -> tuple:
     """(w, D's lr / G's lr): the flags, or the authors' values (their Hopper command: w = 2, D at 4e-4 against 2e-4)."""
     hopper = env_id.startswith("Hopper")
-    return (2.0 if hopper else 1.0) if weight is None else weight, (2.0 if hopper else 1.0) if lr_ratio is None else lr_ratio
+    return (2.0 if hopper else 1.0) if weight is None else weight, (
+        2.0 if hopper else 1.0
+    ) if lr_ratio is None else lr_ratio
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:
@@ -183,29 +197,59 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    noisy = partially_observe(
+        demos["observations"],
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        seed,
+    )
+    inputs = torch.as_tensor(
+        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
+    )
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
-    previous = torch.as_tensor(previous_actions(demos["actions"], demos["episode_starts"]), dtype=torch.float32, device=device)
-    print(f"seed {seed} | adversary reference: predicting a_(t-1) = a_t has error {((previous - targets) ** 2).mean().item():.5f}")
+    previous = torch.as_tensor(
+        previous_actions(demos["actions"], demos["episode_starts"]), dtype=torch.float32, device=device
+    )
+    print(
+        f"seed {seed} | adversary reference: predicting a_(t-1) = a_t has error {((previous - targets) ** 2).mean().item():.5f}"
+    )
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     weight, lr_ratio = authors_setting(args.env, args.adversary_weight, args.adversary_lr_ratio)
-    print(f"seed {seed} | w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {args.learning_rate * lr_ratio:g}")
-    optimizer = torch.optim.Adam([*policy.encoder.parameters(), *policy.head.parameters()], lr=args.learning_rate, betas=(0.5, 0.999))
-    adversary_optimizer = torch.optim.Adam(policy.adversary.parameters(), lr=args.learning_rate * lr_ratio, betas=(0.5, 0.999))
+    print(
+        f"seed {seed} | w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {args.learning_rate * lr_ratio:g}"
+    )
+    optimizer = torch.optim.Adam(
+        [*policy.encoder.parameters(), *policy.head.parameters()], lr=args.learning_rate, betas=(0.5, 0.999)
+    )
+    adversary_optimizer = torch.optim.Adam(
+        policy.adversary.parameters(), lr=args.learning_rate * lr_ratio, betas=(0.5, 0.999)
+    )
 
-    def train_step(idx):  # alternating updates, as the authors: the adversary D, then the encoder G and the policy head F
+    def train_step(
+        idx,
+    ):  # alternating updates, as the authors: the adversary D, then the encoder G and the policy head F
         embedding = policy.embed(inputs[idx])  # once a step: BatchNorm's running statistics move once a step
         adversary_loss = adversary_step(policy, adversary_optimizer, embedding, targets[idx], previous[idx])
         loss, _ = encoder_policy_step(policy, optimizer, embedding, targets[idx], previous[idx], weight)
         return loss, adversary_loss
 
-    evaluations, ms_per_step = fit(args, policy, optimizer, adversary_optimizer, lr_ratio, train_step, len(inputs), seed, device)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+    evaluations, ms_per_step = fit(
+        args, policy, optimizer, adversary_optimizer, lr_ratio, train_step, len(inputs), seed, device
+    )
+    return {
+        "evaluations": evaluations,
+        "policy": policy,
+        "obs_dim": obs_dim,
+        "act_dim": act_dim,
+        "ms_per_step": ms_per_step,
+    }
 
 
 # (fit is this file's own: it decays the adversary's learning rate too, and logs the adversary's mean error)
-def fit(args, policy, optimizer, adversary_optimizer, lr_ratio: float, train_step, num_samples: int, seed: int, device) -> tuple:
+def fit(
+    args, policy, optimizer, adversary_optimizer, lr_ratio: float, train_step, num_samples: int, seed: int, device
+) -> tuple:
     """Run train_step(minibatch indices) for --epochs, both learning rates decayed linearly to zero; evaluate every
     --eval-every epochs and after the last. Returns ([(epoch, mean return)], ms per training step)."""
     steps_per_epoch = num_samples // args.batch_size
@@ -218,7 +262,9 @@ def fit(args, policy, optimizer, adversary_optimizer, lr_ratio: float, train_ste
                 group["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
             for group in adversary_optimizer.param_groups:
                 group["lr"] = lr_ratio * args.learning_rate * (1 - step / total_steps)
-            loss, adversary_loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            loss, adversary_loss = train_step(
+                torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
+            )
             adversary_error += adversary_loss / steps_per_epoch
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
@@ -498,7 +544,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

@@ -8,6 +8,7 @@ random makes copying the previous action from it less reliable. In evaluation th
 
     python history_dropout.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -73,7 +74,9 @@ class Args:
 
     def __post_init__(self):
         if not 0 <= self.history_dropout < 1:
-            raise UsageError(f"--history-dropout must lie in [0, 1), got {self.history_dropout}: it is the chance of zeroing a past-frame entry")
+            raise UsageError(
+                f"--history-dropout must lie in [0, 1), got {self.history_dropout}: it is the chance of zeroing a past-frame entry"
+            )
 
 
 # ==============================================================================================
@@ -435,7 +438,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

@@ -10,6 +10,7 @@ softmax of APE / --keyframe-temperature.
 
     python keyframe.py --env Hopper-v4
 """
+
 import json
 import multiprocessing
 import os
@@ -90,8 +91,16 @@ class Args:
 
     def __post_init__(self):
         if not 0 < self.keyframe_fraction <= 1:
-            raise UsageError(f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: it is the share of samples weighted up")
-        for name in ("keyframe_k", "keyframe_spacing", "keyframe_weight", "keyframe_temperature", "keyframe_model_epochs"):
+            raise UsageError(
+                f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: it is the share of samples weighted up"
+            )
+        for name in (
+            "keyframe_k",
+            "keyframe_spacing",
+            "keyframe_weight",
+            "keyframe_temperature",
+            "keyframe_model_epochs",
+        ):
             if not getattr(self, name) > 0:
                 raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
 
@@ -145,12 +154,16 @@ def previous_actions(actions: np.ndarray, episode_starts: np.ndarray, k: int, sp
     return frames[:, 0 : k * spacing : spacing].reshape(len(actions), -1)
 
 
-def action_prediction_errors(actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int, epochs: int, batch_size: int, device) -> torch.Tensor:
+def action_prediction_errors(
+    actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int, epochs: int, batch_size: int, device
+) -> torch.Tensor:
     """Train the action-prediction model (previous K actions -> a_t) on the demos, once; return its
     squared error ||prediction - a_t||^2 on every sample, APE_t. Seeded by the caller's torch.manual_seed."""
     inputs = torch.as_tensor(previous_actions(actions, episode_starts, k, spacing), dtype=torch.float32, device=device)
     targets = torch.as_tensor(actions, dtype=torch.float32, device=device)
-    model = nn.Sequential(nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])).to(device)
+    model = nn.Sequential(nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])).to(
+        device
+    )
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     for _ in range(epochs * max(1, len(inputs) // batch_size)):
         idx = torch.randint(len(inputs), (batch_size,), device=device)
@@ -192,27 +205,57 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(demos["observations"], velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
-    inputs = torch.as_tensor(stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device)
+    noisy = partially_observe(
+        demos["observations"],
+        velocity_dims(env, args.env, args.velocity_dims),
+        args.obs_noise_std,
+        args.hide_velocities,
+        seed,
+    )
+    inputs = torch.as_tensor(
+        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
+    )
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
-    ape = action_prediction_errors(demos["actions"], demos["episode_starts"], args.keyframe_k, args.keyframe_spacing, args.keyframe_model_epochs, args.batch_size, device)
+    ape = action_prediction_errors(
+        demos["actions"],
+        demos["episode_starts"],
+        args.keyframe_k,
+        args.keyframe_spacing,
+        args.keyframe_model_epochs,
+        args.batch_size,
+        device,
+    )
     weights = keyframe_weights(ape, args.keyframe_fraction, args.keyframe_weight)
-    is_key, at_change = keyframes(ape, args.keyframe_fraction).cpu().numpy(), changepoints(demos["actions"], demos["episode_starts"])
-    print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
-          f"{(is_key & at_change).sum()} of them at action changepoints (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)")
+    is_key, at_change = (
+        keyframes(ape, args.keyframe_fraction).cpu().numpy(),
+        changepoints(demos["actions"], demos["episode_starts"]),
+    )
+    print(
+        f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
+        f"{(is_key & at_change).sum()} of them at action changepoints (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
+    )
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)  # per sample, then weighted
-        loss = ((weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)) * error).mean()
+        loss = (
+            (weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature))
+            * error
+        ).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return loss
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return {"evaluations": evaluations, "policy": policy, "obs_dim": obs_dim, "act_dim": act_dim, "ms_per_step": ms_per_step}
+    return {
+        "evaluations": evaluations,
+        "policy": policy,
+        "obs_dim": obs_dim,
+        "act_dim": act_dim,
+        "ms_per_step": ms_per_step,
+    }
 
 
 # Copied from bc_oh.fit
@@ -506,7 +549,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
