@@ -71,9 +71,9 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
-    """where sg(zeta) joins the policy MLP: late = beside its last hidden feature, into one more linear layer (the paper's CARLA text); output = the MLP outputs an action-sized vector and one more linear layer maps [it, sg(zeta)] to the action (a reading of the paper's MuJoCo text, section 8.3); middle = into its second hidden layer; early = beside the history, into its input; penultimate = BC-OH's own MLP, zeta joined before its last layer (the CARLA text read literally: BC-OH's capacity plus zeta)"""
+    """where sg(zeta) joins the policy MLP: late (the paper's), output, middle, early, penultimate (docs/methods.md)"""
     coarse_output: Literal["action", "feature"] = "action"
-    """what the coarse model passes on: its action zeta (the paper) or its last hidden feature (width --hidden; the action head still learns from the coarse loss)"""
+    """what the coarse model passes on: its action zeta (the paper) or its last hidden feature (width --hidden)"""
     coarse_input: Literal["current", "history"] = "current"
     """input of the coarse model: the current frame o_t (BC-SO, the paper) or the whole history (BC-OH)"""
     policy_input: Literal["history", "current"] = "history"
@@ -81,9 +81,9 @@ class Args:
     stop_gradient: bool = True
     """stop the final loss's gradient at zeta (the paper); --no-stop-gradient lets it train the coarse model too"""
     coarse_action: bool = True
-    """feed sg(zeta) to the policy (the paper); --no-coarse-action is the capacity control: zeros in its place and no coarse loss (BC-OH on C2F's history network)"""
+    """feed sg(zeta) to the policy (the paper); --no-coarse-action, the capacity control: zeros, no coarse loss"""
     two_stage: bool = False
-    """first train the coarse model alone for --epochs and freeze it, then the rest for --epochs with the final loss (evaluations in stage 2)"""
+    """train the coarse model alone for --epochs and freeze it, then the rest for --epochs on the final loss"""
 
 
 # ==============================================================================================
@@ -283,7 +283,7 @@ class Table3Policy(nn.Module):
         fed = feature if self.coarse_output == "feature" else zeta
         fed = fed.detach() if self.stop_gradient else fed
         fed = fed if self.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
+        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h  # noqa: E731
         h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
         return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))

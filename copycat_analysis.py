@@ -175,14 +175,14 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
         raise UsageError(
-            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
         )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
         raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
         )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
@@ -466,7 +466,7 @@ class C2FPolicy(nn.Module):
         fed = feature if self.coarse_output == "feature" else zeta
         fed = fed.detach() if self.stop_gradient else fed
         fed = fed if self.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h
+        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h  # noqa: E731
         h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
         return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))

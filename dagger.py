@@ -44,7 +44,7 @@ class Args:
     demos: Optional[str] = None
     """demonstrations (.npz, README); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
     expert: str = "experts/{env}.pt"
-    """expert checkpoint: it generates the demonstrations when --demos is not given, and labels every DAgger round's states"""
+    """expert checkpoint that labels every DAgger round's states (queried online)"""
     num_demo_samples: Optional[int] = None
     """demonstration steps; None: the paper's 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
     obs_noise_std: float = 0.2
@@ -98,12 +98,14 @@ def check_dagger_args(args):
         raise UsageError(f"--dagger-beta-rounds must be positive, got {args.dagger_beta_rounds}")
     if args.dagger_samples < args.dagger_rounds:
         raise UsageError(
-            f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds {args.dagger_rounds}: raise --dagger-samples or lower --dagger-rounds"
+            f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds "
+            f"{args.dagger_rounds}: raise --dagger-samples or lower --dagger-rounds"
         )
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(
-            f"no expert for {args.env} at {expert_path}: DAgger labels states with the expert online; pass --expert with a checkpoint from expert_ppo.py"
+            f"no expert for {args.env} at {expert_path}: DAgger labels states with the expert online; "
+            "pass --expert with a checkpoint from expert_ppo.py"
         )
     load_expert(expert_path, args.env)  # fails now, not after round 0, if it is not an expert for this env
 
@@ -289,7 +291,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     }
 
 
-# (fit is this file's own: it trains one round, numbering epochs on from the rounds before (the evaluation seeds, the log),
+# (fit is this file's own: it trains one round, numbering epochs on from the rounds before (evaluation seeds, the log),
 # draws minibatches from the one generator of all rounds, and evaluates the final learner three times)
 def fit(
     args,
@@ -304,8 +306,8 @@ def fit(
     progress,
     evaluations,
 ):
-    """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to zero; evaluate every
-    --eval-every epochs and after the round's last, appending (epoch, mean return) to evaluations; progress counts rounds."""
+    """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to zero; evaluate
+    every --eval-every epochs and after the round's last, appending (epoch, mean return) to evaluations."""
     epochs = args.dagger_epochs if round_number else args.epochs
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
@@ -337,7 +339,8 @@ def fit(
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             speed = f"{1000 * progress['train_time'] / progress['steps']:.2f} ms/step"
             eta = job_eta(args, seed, progress["start"], epoch / progress["epochs"])
-            line = f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f} | last eval {last}"
+            line = f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f}"
+            line += f" | last eval {last}"
             print(f"{line} | {speed} | {eta}", flush=True)
 
 
@@ -607,14 +610,14 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
         raise UsageError(
-            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
         )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
         raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
         )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")

@@ -4,7 +4,7 @@
 Train:     python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
 Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
-Demos:     python expert_ppo.py --env Hopper-v4 --make-demos   (demos/Hopper-v4_20000.npz, what the imitation files load)
+Demos:     python expert_ppo.py --env Hopper-v4 --make-demos   (demos/Hopper-v4_20000.npz: the imitation files' input)
 Other rate: python expert_ppo.py --env Hopper-v4 --frame-skip 1   (writes runs/expert_ppo/Hopper-v4__1_fs1)
 
 The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_only=True) reads it):
@@ -43,9 +43,9 @@ class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id with continuous actions (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: Optional[int] = None
-    """simulator steps per action (default: the env's own, 4 for Hopper and Walker2d, 5 for HalfCheetah and Ant); episodes and rewards are rescaled to the same simulated time and return scale"""
+    """simulator steps per action; None: the env's own (time limit and rewards rescaled: docs/methods.md)"""
     seed: int = 1
-    """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed, where the method files' --seeds lists runs"""
+    """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed"""
     total_timesteps: int = 3_000_000
     """env steps to train for, summed over the parallel envs"""
     learning_rate: float = 3e-4
@@ -73,11 +73,11 @@ class Args:
     hidden: int = 64
     """width of the two tanh hidden layers of actor and critic"""
     output_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
-    """where training writes latest.pt (to resume) and best.pt (best periodic evaluation); {rate} is empty at the env's own frame skip and _fsK at --frame-skip K, so runs at other rates do not overwrite it"""
+    """where training writes latest.pt (to resume) and best.pt; {rate}: _fsK at --frame-skip K, else empty"""
     save_every_steps: int = 100_000
     """write latest.pt every this many env steps"""
     eval_every_steps: int = 250_000
-    """evaluate the deterministic policy every this many env steps (the method files' --eval-every counts epochs) and keep the best as best.pt"""
+    """evaluate the deterministic policy every this many env steps, keeping the best as best.pt"""
     train_eval_episodes: int = 5
     """episodes of each periodic evaluation during training"""
     resume: bool = False
@@ -99,7 +99,7 @@ class Args:
     num_demo_samples: Optional[int] = None
     """with --make-demos: demonstration steps; None: the paper's 20000 for Hopper and 10000 otherwise"""
     retarget: bool = False
-    """with --eval-only: --checkpoint may be an expert for another version of --env (e.g. Hopper-v4 for Hopper-v5) with the same observation and action shapes; --ship-to then ships it for --env, recording where it came from"""
+    """with --eval-only: --checkpoint may be an expert for another version of --env (Hopper-v4 for Hopper-v5)"""
 
 
 class UsageError(Exception):
@@ -219,14 +219,14 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
     if not os.path.isfile(path):
         raise UsageError(
-            f"expert checkpoint {path} not found: train one with `python expert_ppo.py --env {env_id}`, or give the path of one"
+            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
         )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
         raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it or re-train with expert_ppo.py"
+            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
         )
     if trained_on != env_id:
         raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
@@ -238,7 +238,7 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 
 
 def machine() -> dict:
-    """Where a result was made: the same command on the same kind of CPU, with these versions, prints the same digits."""
+    """Where a result was made: the same command on the same kind of CPU, with these versions, gives the same digits."""
     cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
     cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
     return {
@@ -272,7 +272,9 @@ def save_atomically(obj, path: str):
 
 
 def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return=None):
-    to_tensor = lambda x: torch.as_tensor(np.asarray(x), dtype=torch.float64)
+    def to_tensor(x):
+        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
+
     return {
         "format": "copycat-suite/expert-ppo/1",
         "env_id": args.env,
@@ -330,7 +332,7 @@ def retargeted_expert(path: str, env_id: str):
     shapes = policy.net[0].in_features in observations and policy.net[-1].out_features == env.action_space.shape[0]
     if made_for.split("-")[0] != env_id.split("-")[0] or not shapes:
         raise UsageError(
-            f"{path} is an expert for {made_for}, another env or other observation and action shapes than {env_id}'s: train one for {env_id}"
+            f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s: train one for {env_id}"
         )
     return policy, made_for
 
@@ -365,11 +367,12 @@ def eval_only(args: Args):
     frame_skip = args.frame_skip or trained_at
     if args.ship_to and frame_skip != trained_at:  # the shipped return must be the one of the expert's own rate
         raise UsageError(
-            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, drop --frame-skip {frame_skip} or --ship-to"
+            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, "
+            f"drop --frame-skip {frame_skip} or --ship-to"
         )
     if frame_skip != native:  # said only at another rate, so that the default output stays as it was
         print(
-            f"evaluating at frame skip {frame_skip} (the env's own is {native}; the checkpoint was trained at {trained_at})"
+            f"evaluating at frame skip {frame_skip} (the env's own is {native}; the expert was trained at {trained_at})"
         )
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
@@ -533,7 +536,8 @@ def train(args: Args):
         trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
         if trained_at != args.frame_skip:
             raise UsageError(
-                f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: pass --frame-skip {trained_at} or use another --output-dir"
+                f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: "
+                f"pass --frame-skip {trained_at} or use another --output-dir"
             )
         try:
             agent.load_state_dict(state["agent"])
@@ -626,7 +630,7 @@ def train(args: Args):
 
         # ---- PPO update
         b_obs, b_act = obs_buf.reshape(-1, obs_dim), act_buf.reshape(-1, act_dim)
-        b_logp, b_adv, b_ret, b_val = (
+        b_logp, b_adv, b_ret, _ = (
             logp_buf.reshape(-1),
             advantages.reshape(-1),
             returns.reshape(-1),
@@ -651,7 +655,8 @@ def train(args: Args):
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
         print(
-            f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min",
+            f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | "
+            f"value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min",
             flush=True,
         )
         if global_step >= next_eval:

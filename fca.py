@@ -68,11 +68,11 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     adversary_weight: Optional[float] = None
-    """w in MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}); None: the authors', 2 on Hopper (their Hopper command), 1 otherwise"""
+    """w in MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}); None: the authors', 2 on Hopper, 1 otherwise"""
     adversary_lr_ratio: Optional[float] = None
-    """D's Adam learning rate over G's and F's (--learning-rate, decayed alike); None: the authors', 2 on Hopper, 1 otherwise"""
+    """D's learning rate over G's and F's (--learning-rate); None: the authors', 2 on Hopper (D 2e-5), 1 otherwise"""
     encoder_hidden: int = 300
-    """width of the encoder's three hidden layers and of the one hidden layer of the policy head and the adversary (the authors' 300)"""
+    """width of the hidden layers of the encoder (3), the policy head and the adversary (1 each): the authors' 300"""
     embedding_dim: int = 100
     """size of the history embedding e (the authors' 100)"""
 
@@ -109,7 +109,7 @@ def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
 
 
 def authors_init(module: nn.Module):
-    """The authors' weights_init: Xavier-uniform Linear weights, zero biases, BatchNorm scales drawn from N(1, 0.02^2)."""
+    """The authors' weights_init: Xavier-uniform Linear weights, zero biases, BatchNorm scales from N(1, 0.02^2)."""
     if isinstance(module, nn.Linear):
         nn.init.xavier_uniform_(module.weight)
         if module.bias is not None:
@@ -211,13 +211,13 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     previous = torch.as_tensor(
         previous_actions(demos["actions"], demos["episode_starts"]), dtype=torch.float32, device=device
     )
-    print(
-        f"seed {seed} | adversary reference: predicting a_(t-1) = a_t has error {((previous - targets) ** 2).mean().item():.5f}"
-    )
+    reference = ((previous - targets) ** 2).mean().item()
+    print(f"seed {seed} | adversary reference: predicting a_(t-1) = a_t has error {reference:.5f}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     weight, lr_ratio = authors_setting(args.env, args.adversary_weight, args.adversary_lr_ratio)
     print(
-        f"seed {seed} | w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {args.learning_rate * lr_ratio:g}"
+        f"seed {seed} | w = {weight:g}; learning rates: G and F {args.learning_rate:g}, "
+        f"D {lr_ratio * args.learning_rate:g}"
     )
     optimizer = torch.optim.Adam(
         [*policy.encoder.parameters(), *policy.head.parameters()], lr=args.learning_rate, betas=(0.5, 0.999)
@@ -277,7 +277,8 @@ def fit(
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             speed, eta = f"{1000 * train_time / step:.2f} ms/step", job_eta(args, seed, start, epoch / args.epochs)
-            line = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | adversary error {adversary_error.item():.5f}"
+            line = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f}"
+            line += f" | adversary error {adversary_error.item():.5f}"
             print(f"{line} | last eval {last} | {speed} | {eta}", flush=True)
     return evaluations, 1000 * train_time / step
 

@@ -75,7 +75,7 @@ class Args:
     def __post_init__(self):
         if not 0 <= self.history_dropout < 1:
             raise UsageError(
-                f"--history-dropout must lie in [0, 1), got {self.history_dropout}: it is the chance of zeroing a past-frame entry"
+                f"--history-dropout must lie in [0, 1), got {self.history_dropout}: the chance of zeroing a past entry"
             )
 
 

@@ -92,7 +92,7 @@ class Args:
     def __post_init__(self):
         if not 0 < self.keyframe_fraction <= 1:
             raise UsageError(
-                f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: it is the share of samples weighted up"
+                f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: the share weighted up"
             )
         for name in (
             "keyframe_k",
@@ -232,7 +232,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     )
     print(
         f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
-        f"{(is_key & at_change).sum()} of them at action changepoints (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
+        f"{(is_key & at_change).sum()} of them at action changepoints "
+        f"(top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
     )
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
