@@ -19,7 +19,6 @@ It prints a table and writes the pictures and a JSON report to --output-dir.
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
     python copycat_analysis.py --env Hopper-v4 --control runs/c2f__no-coarse-action/Hopper-v4/seed1.pt   # and the capacity control
 """
-import hashlib
 import json
 import os
 import sys
@@ -60,7 +59,7 @@ class Args:
     control: Optional[str] = None
     """optional fourth model: the capacity control, `c2f.py --no-coarse-action --save-model` (do(o_hist) and the copycat score only: it reads no zeta)"""
     demos: Optional[str] = None
-    """held-out demonstrations (.npz, the method scripts' format); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
+    """held-out demonstrations (.npz as `expert_ppo.py --make-demos` writes, read as the method files read theirs, whole); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that generates the held-out demos when --demos is not given"""
     num_demo_samples: int = 5000
@@ -235,13 +234,57 @@ def write_atomically(path: str, write):
             os.remove(tmp)
 
 
-def demo_meta(path: str) -> dict:
-    """The JSON meta of a demo file: env_id, source, expert_sha256, num_samples, seed, frame_skip ({} if none)."""
+# Copied from bc_oh.require
+def require(condition, message: str):
+    """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
+    if not condition:
+        raise UsageError(message)
+
+
+# Copied from bc_oh.load_demos
+def load_demos(args, env: gym.Env) -> tuple:
+    """(demos, meta): the arrays of --demos, or of the file `expert_ppo.py --make-demos` wrote, checked against env."""
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    native = getattr(env.unwrapped, "frame_skip", None)
+    n, rate = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000), args.frame_skip
+    path = args.demos or f"demos/{args.env}{'' if rate == native else f'_fs{rate}'}_{n}.npz"
+    make = f"python expert_ppo.py --env {args.env} --make-demos{f' --frame-skip {rate}' * (rate != native)}"
+    make += f" --num-demo-samples {n}" * bool(args.num_demo_samples)
+    require(os.path.isfile(path), f"demo file {path} not found: " + ("check the path" if args.demos else f"run {make}"))
     try:
         with np.load(path, allow_pickle=False) as data:
-            return json.loads(str(data["meta"])) if "meta" in data else {}
-    except Exception:
-        return {}
+            meta = json.loads(str(data["meta"])) if "meta" in data else {}
+            demos = {key: data[key] for key in ("observations", "actions", "episode_starts") if key in data}
+    except Exception as error:
+        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the format in README.md")
+    made_for, made_at = meta.get("env_id", args.env), meta.get("frame_skip", native)  # no record: the native rate
+    require(made_for == args.env, f"{path} holds demos of {made_for}: pass --env {made_for}, or demos of {args.env}")
+    require(made_at == rate, f"{path} was made at frame skip {made_at}, not {rate}: pass --frame-skip {made_at}")
+    for key in ("observations", "actions", "episode_starts"):
+        require(key in demos, f"{path} has no {key!r} array: see the .npz format in README.md")
+        require(demos[key].dtype.kind in "biuf", f"{path}: {key} hold {demos[key].dtype} values: save them as numbers")
+    obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
+    turned = (obs_dim, act_dim) == (len(obs), len(actions))
+    fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
+    shapes = (
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    )
+    require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
+    rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
+    require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
+    held = f"{path} holds {len(obs)} steps"
+    require(len(obs) >= (args.num_demo_samples or 0), f"{held}: pass --num-demo-samples {len(obs)} or fewer")
+    obs, actions, starts = obs[:n].astype(np.float64), actions[:n].astype(np.float32), starts[:n].astype(bool)
+    require(len(obs) > args.batch_size, f"{held}, not more than a batch: use more, or a smaller --batch-size")
+    for key, values in (("observations", obs), ("actions", actions)):
+        bad = np.argwhere(~np.isfinite(values))
+        require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3, 0].tolist()}: fix or drop them")
+    outside = np.argwhere((actions < env.action_space.low) | (actions > env.action_space.high))
+    require(not len(outside), f"{path}: actions of rows {outside[:3, 0].tolist()} lie outside the env's bounds: clip")
+    require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
+    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
+    print(f"demos: {len(obs)} steps from {path}; {shortcut} (near 0 means copying the last action is a shortcut)")
+    return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
 # Copied from bc_oh.copy_error
@@ -252,83 +295,17 @@ def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
-def load_or_generate_demos(args, env: gym.Env) -> dict:
-    """The demos of --demos, or the rollout of --expert cached under demos/, made again when the cache was
-    recorded at another frame skip or by another expert file (its meta holds the expert's SHA-256)."""
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
-    native = getattr(env.unwrapped, "frame_skip", None)  # env is made at the env's own rate
-    frame_skip = args.frame_skip or native  # a demo file without the record was made at the native rate
-    path = args.demos or f"demos/{args.env}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
-    expert_path = args.expert.format(env=args.env)
-    if args.demos is None and os.path.isfile(expert_path):
-        with open(expert_path, "rb") as file:
-            expert_sha256 = hashlib.sha256(file.read()).hexdigest()
-        if (demo_meta(path).get("expert_sha256"), demo_meta(path).get("frame_skip", native)) != (expert_sha256, frame_skip):
-            print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
-            demos = generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), num_samples)
-            meta = json.dumps({"env_id": args.env, "source": expert_path, "expert_sha256": expert_sha256, "num_samples": num_samples,
-                               "seed": 0, "frame_skip": frame_skip})
-            write_atomically(path, lambda file: np.savez(file, meta=np.array(meta), **demos))
-    if not os.path.isfile(path) and args.demos:
-        raise UsageError(f"demo file {path} not found: check the path, or drop --demos to roll out the expert")
-    if not os.path.isfile(path):
-        raise UsageError(f"no expert for {args.env} at {os.path.abspath(expert_path)} (--expert is relative to the working directory, and the "
-                         "repository's experts are in its experts/ folder): run from the repository root, pass --expert PATH or --demos, "
-                         f"or train one with `python expert_ppo.py --env {args.env}`")
-    recorded_env = demo_meta(path).get("env_id")
-    if recorded_env and recorded_env != args.env:
-        raise UsageError(f"{path} holds demos of {recorded_env}, not {args.env}: pass --env {recorded_env}, or demos of {args.env}")
-    recorded_rate = demo_meta(path).get("frame_skip", native)  # a file without the record was made at the native rate
-    if recorded_rate != frame_skip:
-        raise UsageError(f"{path} was recorded at frame skip {recorded_rate}, this run is at {frame_skip}: pass --frame-skip {recorded_rate} or demos of this rate")
-    meaning = {"observations": "o_t per step, (N, obs_dim)", "actions": "the expert's a_t, (N, act_dim)", "episode_starts": "True where an episode starts, (N,)"}
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [key for key in meaning if key not in data]
-            demos = {key: data[key] for key in meaning if key in data}
-    except Exception as error:
-        fix = "delete it to regenerate" if args.demos is None else "save the arrays with np.savez, as plain numeric arrays"
-        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}: {error}): see the .npz format in README.md, or {fix}")
-    if missing:
-        raise UsageError(f"{path} has no {missing[0]!r} array ({meaning[missing[0]]}): see the .npz format in README.md")
-    n = len(demos["actions"]) if demos["actions"].ndim else 0
-    if demos["observations"].shape != (n, obs_dim) or demos["actions"].shape != (n, act_dim) or demos["episode_starts"].shape != (n,):
-        raise UsageError(f"{path} holds observations {demos['observations'].shape} and actions {demos['actions'].shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env")
-    if args.demos and args.num_demo_samples:  # the Minari import's rule: the first N steps
-        if args.num_demo_samples > n:
-            raise UsageError(f"--num-demo-samples {args.num_demo_samples}, but {path} holds {n} steps: pass at most {n}, or leave it out for all")
-        print(f"--num-demo-samples {args.num_demo_samples}: the first {args.num_demo_samples} of the {n} steps in {path}")
-        demos, n = {key: value[:args.num_demo_samples] for key, value in demos.items()}, args.num_demo_samples
-    if n <= args.batch_size:
-        raise UsageError(f"{path} holds {n} samples, fewer than one batch of {args.batch_size}: use more demos or a smaller --batch-size")
-    for key, dtype in (("observations", np.float64), ("actions", np.float32)):  # any real dtype converts
-        if not (np.issubdtype(demos[key].dtype, np.integer) or np.issubdtype(demos[key].dtype, np.floating) or demos[key].dtype == bool):
-            raise UsageError(f"{path}: {key} hold {demos[key].dtype} values, not real numbers: save them as floats")
-        demos[key] = demos[key].astype(dtype)
-        bad = np.argwhere(~np.isfinite(demos[key]))
-        if len(bad):
-            raise UsageError(f"{path}: {key} has the non-finite value {demos[key][tuple(bad[0])]} at row {bad[0][0]}, column {bad[0][1]}: fix or drop that step")
-    low, high = env.action_space.low, env.action_space.high
-    outside = np.argwhere((demos["actions"] < low) | (demos["actions"] > high))
-    if len(outside):
-        row, column = outside[0]
-        raise UsageError(f"{path}: actions[{row}, {column}] = {demos['actions'][row, column]:g} lies outside {args.env}'s bounds "
-                         f"[{low[column]:g}, {high[column]:g}]: clip or rescale the actions to the env's action space")
-    demos["episode_starts"] = demos["episode_starts"].astype(bool)
-    if not demos["episode_starts"][0]:
-        raise UsageError(f"{path}: episode_starts[0] is False, but the first step starts an episode: episode_starts is True on each "
-                         "episode's first step (done flags, True on the last step, shifted by one give this: use [True] + dones[:-1])")
-    print(f"demos: {n} steps from {path}; copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(demos['actions'], demos['episode_starts']):.3f} "
-          "(near 0 means copying the last action is a shortcut)")
-    return demos
-
-
 def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
-    """--demos, or a fresh expert rollout from reset seed --seed: states the policies were not trained on."""
-    if args.demos is not None:  # the loader of the method scripts checks the file, its shapes and its rate
-        return load_or_generate_demos(SimpleNamespace(demos=args.demos, env=args.env, num_demo_samples=None, expert=args.expert, batch_size=1,
-                                                      frame_skip=frame_skip), env)
+    """--demos, checked as the method files check theirs (its env, rate, arrays, shapes, values), or a fresh
+    expert rollout from reset seed --seed: states the policies were not trained on."""
+    if args.demos is not None:  # the whole file; batch_size 1: any file of two steps or more
+        rate = frame_skip or getattr(env.unwrapped, "frame_skip", None)  # the models' rate (None: the env's own)
+        given = SimpleNamespace(env=args.env, demos=args.demos, num_demo_samples=None, batch_size=1, frame_skip=rate)
+        try:
+            return load_demos(given, env)[0]
+        except UsageError as error:  # its fix "pass --frame-skip K" is the method files': here the models set the rate
+            message, rate_fix, _ = str(error).partition(": pass --frame-skip")
+            raise UsageError(f"{message}, the models' rate: pass --demos made at frame skip {rate}" if rate_fix else message)
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos")

@@ -432,6 +432,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         model = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"]}
         model.update(act_dim=result["act_dim"], state_dict=result["policy"].cpu().state_dict())
         path = os.path.join(output_dir, f"seed{seed}.pt")
+        os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
         os.replace(f"{path}.tmp", path)  # written, then renamed: an interrupted run leaves no half checkpoint
     write_result(os.path.join(output_dir, f"result_seeds{seed}.json"), args, output_dir, {seed: entry})  # a rerun keeps

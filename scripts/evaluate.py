@@ -27,6 +27,9 @@ from benchmark.results import OneLineParser, UsageError, run_cli  # noqa: E402
 CHECKPOINT_KEYS = ("method", "env_id", "args", "obs_dim", "act_dim", "state_dict")
 """what every method file's --save-model writes"""
 SAVE_FIX = "pass a seed<S>.pt that a method file wrote with --save-model"
+RETIRED = ("expert", "cuda_graph")
+"""settings the method files dropped that change neither the policy nor its evaluation (--expert: which expert made the
+demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on the GPU): an older checkpoint's are ignored"""
 
 
 def read_checkpoint(path) -> dict:
@@ -62,13 +65,14 @@ def method_module(method: str, path):
 
 
 def saved_args(module, checkpoint: dict, path):
-    """The method file's Args with the checkpoint's values (settings the file added since keep their defaults)."""
+    """The method file's Args with the checkpoint's values (settings the file added since keep their defaults, RETIRED
+    ones it no longer has are dropped)."""
     known = {field.name for field in fields(module.Args)}
-    unknown = sorted(set(checkpoint["args"]) - known)
+    unknown = sorted(set(checkpoint["args"]) - known - set(RETIRED))
     if unknown:
         raise UsageError(f"{path} records the setting {unknown[0]!r}, which this {checkpoint['method']}.py does not have: "
                          f"it was saved by another version of {checkpoint['method']}.py; evaluate it with that version")
-    return module.Args(**{name: value for name, value in checkpoint["args"].items()})
+    return module.Args(**{name: value for name, value in checkpoint["args"].items() if name in known})
 
 
 def load_policy(path):
@@ -118,7 +122,7 @@ def main(argv=None):
     options = parser.parse_args(argv)
     module, policy, args = load_policy(options.checkpoint)
     episodes = options.episodes or args.eval_episodes
-    print(f"{module.METHOD} from {options.checkpoint} on {describe(args)}: {episodes} episodes from --seed {options.seed}")
+    print(f"{module.METHOD} from {options.checkpoint} on {describe(args)}: {episodes} episode{'s' * (episodes > 1)} from --seed {options.seed}")
     returns = module.evaluate(policy, args, episodes, options.seed, torch.device("cpu"))
     for i, value in enumerate(returns):
         print(f"episode {i + 1} | seed {options.seed + i} | return {value!r}")  # repr: every digit, to compare with a run's JSON

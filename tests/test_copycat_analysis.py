@@ -12,7 +12,7 @@ import torch.nn as nn
 import tyro
 
 import copycat_analysis as ca
-from conftest import assert_usage_error, link_experts, run_script
+from conftest import assert_usage_error, link_experts, make_demos, run_script
 
 OBS, ACT, H = 4, 2, 2
 W = np.array([[1.0, -0.5, 0.3, 0.0], [0.2, 0.8, -1.0, 0.5]])  # the hand-made expert: a_t = W o_t
@@ -209,6 +209,41 @@ def bad_run(workdir, paths, monkeypatch, **settings):
         ca.run(ca.Args(**models, **{"num_demo_samples": 300, "eval_episodes": 1, "output_dir": "bad", **settings}))
     assert not (workdir / "bad").exists(), "nothing is written on bad input"
     return str(error.value)
+
+
+def test_held_out_demos_from_a_file_are_read_whole_as_the_method_files_read_theirs(saved, monkeypatch):
+    """--demos: the file's steps, all of them (not --num-demo-samples'), are the held-out demos of the analysis."""
+    workdir, paths = saved
+    demo_file = make_demos("Hopper-v4", 200)
+    monkeypatch.chdir(workdir)
+    ca.run(ca.Args(**{m: str(paths[m]) for m in ca.METHODS}, demos=str(demo_file), eval_episodes=1, output_dir="from_file"))
+    report = json.loads((workdir / "from_file" / "copycat_analysis.json").read_text())
+    with np.load(demo_file) as data:
+        actions = data["actions"].astype(np.float64)
+    assert report["demo_steps"] == 200 and report["args"]["num_demo_samples"] == 5000
+    assert report["action_std"] == actions.std(0).clip(1e-6).tolist()
+
+
+def with_nan_at_row_17(tmp_path):
+    with np.load(make_demos("Hopper-v4", 300)) as data:
+        arrays = dict(data)
+    arrays["observations"][17, 3] = np.nan
+    np.savez(tmp_path / "nan.npz", **arrays)
+    return tmp_path / "nan.npz"
+
+
+BAD_DEMOS = {
+    "not found": (lambda tmp: tmp / "nowhere.npz", "nowhere.npz not found: check the path"),
+    "another rate": (lambda tmp: make_demos("Hopper-v4", 300, 1),
+                     "was made at frame skip 1, not 4, the models' rate: pass --demos made at frame skip 4"),
+    "a non-finite value": (with_nan_at_row_17, "observations hold non-finite values at rows [17]: fix or drop them"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_DEMOS))
+def test_bad_held_out_demos_are_refused_as_the_method_files_refuse_them(saved, monkeypatch, tmp_path, case):
+    make, message = BAD_DEMOS[case]
+    assert message in bad_run(*saved, monkeypatch, demos=str(make(tmp_path)))
 
 
 def test_missing_model(saved, monkeypatch):

@@ -76,6 +76,22 @@ def test_the_defaults_are_the_runs_episode_count_from_seed_0_and_the_settings_ar
     assert returns != noisy  # the sensor the checkpoint records is the one evaluated
 
 
+def test_one_episode_reads_one_episode(trained):
+    """The plural only above 1: "1 episode" in the first line and the summary."""
+    path, _ = trained("bc_oh")
+    result, returns = evaluate(path, "--episodes", 1, "--seed", 5)
+    assert result.stdout.splitlines()[0].endswith(": 1 episode from --seed 5")
+    assert result.stdout.splitlines()[-1] == f"Hopper-v4 bc_oh: {returns[0]:.1f} ± 0.0 over 1 episode"
+
+
+def test_a_checkpoint_from_before_expert_and_cuda_graph_went_plays_the_same_episodes(trained, tmp_path):
+    """Models saved before the method files dropped --expert and --cuda-graph (e.g. the shipped results/h3 ones) record
+    them; neither changes the policy or its evaluation, so they are ignored (dagger.py keeps --expert, and uses it)."""
+    path, _ = trained("bc_oh")
+    older = edited(path, tmp_path, expert="experts/{env}.pt", cuda_graph=True)
+    assert evaluate(older, "--episodes", 2, "--seed", 7)[1] == evaluate(path, "--episodes", 2, "--seed", 7)[1]
+
+
 def damaged(path, tmp_path):
     (tmp_path / "damaged.pt").write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     return tmp_path / "damaged.pt"

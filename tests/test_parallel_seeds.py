@@ -11,10 +11,21 @@ TWO_SEEDS = (*BUDGET[:BUDGET.index("--seeds")], *BUDGET[BUDGET.index("--seeds") 
 """test_pinned_output's tiny budget, with two seeds"""
 
 
-def tiny_run(folder, script: str, workers: int) -> tuple:
+@pytest.fixture(scope="module")
+def fixed_mode_demos(tmp_path_factory):
+    """The demos of the pins, made as test_pinned_output makes them: by expert_ppo.py --make-demos in the fixed mode
+    (the session's demo files are made in the default mode, whose last digits differ by CPU)."""
+    folder = link_experts(tmp_path_factory.mktemp("fixed_mode_demos"), demos=False)
+    made = run_script("expert_ppo.py", *BUDGET[:2], "--make-demos", *BUDGET[-2:], cwd=folder, env=FIXED_MODE)
+    assert made.returncode == 0, made.stderr
+    return folder / "demos"
+
+
+def tiny_run(folder, script: str, workers: int, demos) -> tuple:
     """({seed: its printed epoch lines without timings}, {seed: its JSON evaluations}, the combined JSON) of a run."""
     folder.mkdir()
-    link_experts(folder)
+    link_experts(folder, demos=False)
+    (folder / "demos").symlink_to(demos, target_is_directory=True)
     flags = PINNED[script][1]  # dagger's small rounds; none for the others
     result = run_script(f"{script}.py", *TWO_SEEDS, *flags, "--workers", workers, "--output-dir", folder / "out", cwd=folder, env=FIXED_MODE)
     assert result.returncode == 0, result.stderr
@@ -25,10 +36,10 @@ def tiny_run(folder, script: str, workers: int) -> tuple:
 
 
 @pytest.mark.parametrize("script", ["bc_oh", "average_ensemble", "dagger"])
-def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script):
+def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_mode_demos):
     """bc_oh stands for the scripts that share its training loop; average_ensemble and dagger have their own fits."""
-    parallel_lines, parallel_evaluations, combined = tiny_run(tmp_path / "two", script, 2)
-    lines, evaluations, sequential = tiny_run(tmp_path / "one", script, 1)
+    parallel_lines, parallel_evaluations, combined = tiny_run(tmp_path / "two", script, 2, fixed_mode_demos)
+    lines, evaluations, sequential = tiny_run(tmp_path / "one", script, 1, fixed_mode_demos)
     assert all(len(lines[seed]) == len(PINNED[script][2]) for seed in (1, 2)) and lines[1] != lines[2]
     assert lines[1] == PINNED[script][2]  # seed 1 of two prints what seed 1 alone prints
     assert parallel_lines == lines

@@ -1,6 +1,9 @@
 """Each method file must run on its own when copied alone into a new folder: it imports nothing of this repo."""
 import ast
+import dataclasses
+import importlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -39,23 +42,63 @@ def test_script_runs_alone_in_an_empty_folder(script, tmp_path):
     assert "--env" in result.stdout
 
 
+def in_order(node) -> list:
+    """The string constants under node, in source order (an f-string's parts, nested ones included)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return [node.value]
+    return [text for child in ast.iter_child_nodes(node) for text in in_order(child)]
+
+
+def usage_messages(tree) -> set:
+    """The text of every UsageError message: `raise UsageError(...)` and `require(condition, message)`, and apart, the
+    text of each local variable a message interpolates (e.g. a command built up in `make = ...; make += ...`)."""
+    messages = set()
+    for scope in [tree, *(node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)))]:
+        assigned = {}  # a local name -> the strings of its assignments, in source order
+        for node in ast.walk(scope) if scope is not tree else []:
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AugAssign) else []
+            for target in (target for target in targets if isinstance(target, ast.Name)):
+                assigned.setdefault(target.id, []).extend(in_order(node.value))
+        for node in ast.walk(scope):
+            if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call) and getattr(node.exc.func, "id", "") == "UsageError":
+                message = node.exc
+            elif isinstance(node, ast.Call) and getattr(node.func, "id", "") == "require" and len(node.args) == 2:
+                message = node.args[1]
+            else:
+                continue
+            messages.add(" ".join(in_order(message)))
+            names = {name.id for name in ast.walk(message) if isinstance(name, ast.Name)}
+            messages |= {" ".join(assigned[name]) for name in names & set(assigned)}
+    return messages
+
+
+COMMAND = re.compile(r"python (\w+)\.py\b([^`),;:]*)")
+"""`python SCRIPT.py --flag ...` inside a message: a command of that script, up to a backtick, bracket or punctuation"""
+
+
+def named_flags(text) -> set:
+    return {flag.replace("-", "_").removeprefix("no_") for flag in re.findall(r"--([a-z][a-z0-9-]*)", text)}
+
+
+def args_fields(script) -> set:
+    return {field.name for field in dataclasses.fields(importlib.import_module(script).Args)}
+
+
 @pytest.mark.parametrize("script", SCRIPTS)
 def test_error_messages_name_only_flags_the_script_has(script):
     """A fix that names a flag the script does not take is a lie (e.g. "pass --checkpoint" in a file without
-    one): every --flag in a UsageError message is a field of that script's Args."""
-    import dataclasses
-    import importlib
-    import re
-
-    module = importlib.import_module(script.removesuffix(".py"))
-    fields = {field.name for field in dataclasses.fields(module.Args)}
-    named = set()
-    for node in ast.walk(ast.parse((REPO_ROOT / script).read_text())):
-        if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call) and getattr(node.exc.func, "id", "") == "UsageError":
-            text = " ".join(part.value for part in ast.walk(node.exc) if isinstance(part, ast.Constant) and isinstance(part.value, str))
-            named |= {flag.replace("-", "_").removeprefix("no_") for flag in re.findall(r"--([a-z][a-z0-9-]*)", text)}
+    one): every --flag in a UsageError message is a field of that script's Args, except in a command of another
+    script that the message quotes ("run python expert_ppo.py --env E --make-demos"): those are that script's."""
+    fields, named, quoted = args_fields(script.removesuffix(".py")), set(), {}
+    for text in usage_messages(ast.parse((REPO_ROOT / script).read_text())):
+        for command in COMMAND.finditer(text):
+            quoted.setdefault(command[1], set()).update(named_flags(command[2]))
+        named |= named_flags(COMMAND.sub("", text))
     if script == "copycat_analysis.py":
         # it reads models trained by the method files: its messages name their training flags
         # (--seeds, --save-model, --coarse-output, --frame-skip, --velocity-dims, --batch-size)
-        fields |= {field.name for field in dataclasses.fields(importlib.import_module("c2f").Args)}
+        fields |= args_fields("c2f")
     assert named <= fields, f"{script} names flags it does not have: {sorted(named - fields)}"
+    for other, flags in quoted.items():
+        assert (REPO_ROOT / f"{other}.py").is_file(), f"{script} quotes a command of {other}.py, which is not in the repo"
+        assert flags <= args_fields(other), f"{script} quotes {other}.py with flags it does not have: {sorted(flags - args_fields(other))}"
