@@ -8,13 +8,13 @@ prints a Markdown table of wall times (the whole command: start-up, training, ev
 """
 import os
 import platform
-import re
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from benchmark.machine import cpuinfo_field
 from benchmark.results import OneLineParser, UsageError, run_cli
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -35,9 +35,7 @@ def wall_time(command: list) -> float:
 
 
 def cpu_name() -> str:
-    cpus = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").is_file() else ""
-    model = re.search(r"^model name\s*: (.*)$", cpus, re.M)
-    return model[1] if model else platform.processor() or platform.machine()
+    return cpuinfo_field("model name") or platform.processor() or platform.machine()
 
 
 def main(argv=None) -> int:
