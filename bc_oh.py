@@ -5,7 +5,6 @@ With noisy velocities the history is informative, but it also lets the network i
 it: the copycat shortcut that coarse-to-fine imitation (c2f.py) fights.
 
     python bc_oh.py --env Hopper-v4
-    python expert_ppo.py --env Hopper-v4 --frame-skip 1 --make-demos && python bc_oh.py --env Hopper-v4 --frame-skip 1
 """
 
 import json

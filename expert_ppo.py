@@ -433,7 +433,8 @@ def make_demos(args: Args):
     into demos/, with a meta that names the expert (its SHA-256) and its return. A file already made from the same
     expert file with the same settings is kept."""
     native, frame_skip = env_frame_skip(args.env), env_frame_skip(args.env, args.frame_skip)
-    num_samples = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000)
+    default = 20000 if args.env.startswith("Hopper") else 10000
+    num_samples = default if args.num_demo_samples is None else args.num_demo_samples
     if num_samples <= 1:
         raise UsageError(f"--num-demo-samples must be more than 1, got {num_samples}")
     expert_path, path = args.checkpoint.format(env=args.env), demo_path(args.env, frame_skip, native, num_samples)

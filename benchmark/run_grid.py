@@ -9,6 +9,10 @@ Method `expert` evaluates experts/<env>.pt with `expert_ppo.py --eval-only` once
 deterministic and its evaluation episodes are seeded by expert_ppo.py, so it is seed 0) and stores the
 result in the same JSON shape, with score = mean return over --expert-episodes episodes.
 
+Before its runs the grid makes the demo files they load (`expert_ppo.py --env E --make-demos`, at the frame skip
+and sample count of --extra-args; cheap when a file is already made from the same expert), and after each method
+run it adds where the run was made (`machine`, benchmark/machine.py) to its result.
+
 The grid accumulates: a combination whose valid result exists, made with the settings asked for now
 (the paper's unless --extra-args changes them), is skipped. A corrupt or partial result, or one made
 with other settings, is reported and re-run. A run that fails does not stop the others; failures are
@@ -220,10 +224,11 @@ def machine() -> dict:
 def demo_commands(runs: list, options: Options) -> list:
     """The `expert_ppo.py --make-demos` commands that make the demo files the grid's method runs load (each is cheap when
     its file is already made from the same expert): one per env, at the --frame-skip and --num-demo-samples asked for."""
-    wanted = [word for flag in ("--frame-skip", "--num-demo-samples") if flag in options.extra_args
-              for word in options.extra_args[options.extra_args.index(flag):][:2]]
-    if "--demos" in options.extra_args:  # the grid's own demo file: nothing to make
+    settings = explicit_settings(options.extra_args)
+    if settings.get("demos") is not None:  # the grid's own demo file: nothing to make
         return []
+    wanted = [word for name in ("frame_skip", "num_demo_samples") if settings.get(name) is not None
+              for word in (f"--{name.replace('_', '-')}", str(settings[name]))]
     envs = sorted({run.env for run in runs if run.method != EXPERT})
     return [[sys.executable, "expert_ppo.py", "--env", env, "--make-demos", *wanted] for env in envs]
 
@@ -234,7 +239,7 @@ def make_demos(runs: list, options: Options):
         made = subprocess.run(cmd, cwd=options.scripts_dir, capture_output=True, text=True)
         if made.returncode != 0:
             raise UsageError(f"could not make the demos ({shlex.join(shown_command(cmd))}): {last_line_of(made.stderr or made.stdout)}")
-        print(made.stdout.strip().splitlines()[-1], flush=True)
+        print(last_line_of(made.stdout), flush=True)
 
 
 def add_machine(run: Run, options: Options):
@@ -326,11 +331,11 @@ def execute(run: Run, options: Options, processes: Processes):
     try:
         if run.method == EXPERT:
             write_expert_result(run, options, log.read_text())
-        else:
-            add_machine(run, options)
+        reason = why_not_done(run, options)
+        if reason is None and run.method != EXPERT:
+            add_machine(run, options)  # to a valid result only
     except (ResultError, OSError, ValueError) as error:
         return f"{error} (log: {log})"
-    reason = why_not_done(run, options)
     return None if reason is None else f"exited 0 but left no valid result: {reason} (log: {log})"
 
 
@@ -419,6 +424,9 @@ def main(argv=None) -> int:
             print(f"re-run {run}: {reason}", flush=True)
         if options.dry_run:
             print(f"run  {run}: (cd {options.scripts_dir} && python {shlex.join(command(run, options)[1:])})")
+    if options.dry_run:  # what runs first: the demos of the runs to do
+        for cmd in demo_commands(todo, options):
+            print(f"demos {cmd[3]}: (cd {options.scripts_dir} && python {shlex.join(cmd[1:])})")
     print(f"grid: {len(runs)} combinations, {len(runs) - len(todo)} done, {len(todo)} to run"
           + ("" if options.dry_run else f" on {options.workers} workers"), flush=True)
     if options.dry_run or not todo:

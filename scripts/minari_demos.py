@@ -118,7 +118,7 @@ def export_demos(path: str, dataset_id: str, env_id=None):
         raise UsageError(f"Minari dataset {dataset_id} already exists at {get_dataset_path(dataset_id)}: "
                          f"pick another id or version, or delete it with `minari delete {dataset_id}`")
     if not os.path.isfile(path):
-        raise UsageError(f"demo file {path} not found: check the path (method scripts cache theirs as demos/<env>_<N>.npz)")
+        raise UsageError(f"demo file {path} not found: check the path (expert_ppo.py --make-demos writes demos/<env>_<N>.npz)")
     try:
         with np.load(path, allow_pickle=False) as data:
             demos = {key: data[key] for key in data.files}
@@ -130,8 +130,8 @@ def export_demos(path: str, dataset_id: str, env_id=None):
             raise UsageError(f"{path} has no {key!r} array: {FORMAT_FIX}")
     for key in ("rewards", "terminations", "truncations", "final_observations"):
         if key not in demos:
-            raise UsageError(f"{path} has no {key!r} array (made before demo files kept rewards and episode ends): delete the cached "
-                             "demos/<env>_<N>.npz file and rerun any method script, e.g. `python bc_oh.py --env Hopper-v4`, to roll the expert out again")
+            raise UsageError(f"{path} has no {key!r} array (made before demo files kept rewards and episode ends): make it again "
+                             "with `python expert_ppo.py --env <env> --make-demos`, which rolls the expert out again")
     env_id = env_id or meta.get("env_id")
     if env_id is None:
         raise UsageError(f"{path} names no env in its meta: pass --env, e.g. --env Hopper-v4")
@@ -167,14 +167,14 @@ def export_demos(path: str, dataset_id: str, env_id=None):
 
 
 def check_with_the_method_loader(path, env_id: str, frame_skip):
-    """The import goes through the loader of every method file (bc_oh.load_or_generate_demos, here the tooling
-    may import the repository's code): what a method file would refuse is refused here, in one line."""
+    """The import goes through the loader of every method file (bc_oh.load_demos, here the tooling may import the
+    repository's code): what a method file would refuse is refused here, in one line."""
     import bc_oh
 
-    args = SimpleNamespace(demos=str(path), env=env_id, num_demo_samples=None, expert="", batch_size=1, frame_skip=frame_skip)
+    args = SimpleNamespace(demos=str(path), env=env_id, num_demo_samples=None, batch_size=1, frame_skip=frame_skip)
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # its "demos: ..." line: the import prints its own
-            bc_oh.load_or_generate_demos(args, bc_oh.make_env(env_id))
+            bc_oh.load_demos(args, bc_oh.make_env(env_id))
     except bc_oh.UsageError as error:
         raise UsageError(f"the method files would refuse this import ({error})")
 

@@ -103,6 +103,13 @@ def tiny_args(module, **overrides):
     return module.Args(**{**settings, **overrides})
 
 
+def load_demos(module, **overrides):
+    """module.load_demos(tiny_args(module, **overrides), Hopper-v4) as run() calls it: at the env's own frame skip
+    (4) unless frame_skip is given, as run() resolves it before loading. Returns (demos, meta)."""
+    args = tiny_args(module, **{"frame_skip": 4, **overrides})
+    return module.load_demos(args, module.make_env(args.env))
+
+
 def skip_evaluation(monkeypatch, module, score=0.0):
     """Replace module.evaluate by a constant, for training tests that need no env rollouts."""
     monkeypatch.setattr(module, "evaluate", lambda policy, args, episodes, seed, device: [score] * episodes)

@@ -16,22 +16,35 @@ from benchmark import aggregate, run_grid
 from benchmark.paper import paper_settings
 from benchmark.results import ResultError, UsageError, make_result, read_result, result_path
 
+DEMO_FILE = '''
+def demo_file(env, frame_skip, num_samples):
+    """The demo file the real method files load, and expert_ppo.py --make-demos writes."""
+    rate = "" if frame_skip in (None, 5 if env.startswith(("Ant", "HalfCheetah")) else 4) else f"_fs{frame_skip}"
+    return f"demos/{env}{rate}_{num_samples or (20000 if env.startswith('Hopper') else 10000)}.npz"
+'''
+
 FAKE_METHOD = f'''
-"""Stand-in method: writes a result at once. FAKE_CRASH_SEED crashes that seed, FAKE_SILENT_SEED exits 0 without a result,
-FAKE_SLEEP waits that long first (its pid in pid<seed>)."""
+"""Stand-in method: loads nothing but, as the method files, refuses to run without its demo file; writes a result at once.
+FAKE_CRASH_SEED crashes that seed, FAKE_SILENT_SEED exits 0 without a result, FAKE_SLEEP waits that long first (its pid
+in pid<seed>)."""
 import argparse, json, os, sys, time
 sys.path.insert(0, {str(REPO_ROOT)!r})
 from benchmark.results import make_result, write_text
 METHOD = "fake"
+{DEMO_FILE}
 parser = argparse.ArgumentParser()
 for name in ("--env", "--output-dir"):
     parser.add_argument(name)
 parser.add_argument("--seeds", type=int, nargs="+")
 parser.add_argument("--epochs", type=int, default=1000)
+parser.add_argument("--num-demo-samples", type=int)
+parser.add_argument("--frame-skip", type=int)
 args = parser.parse_args()
 seed = args.seeds[0]
 with open("calls.txt", "a") as calls:
     calls.write(f"{{args.env}} {{seed}}\\n")
+if not os.path.isfile(demo_file(args.env, args.frame_skip, args.num_demo_samples)):
+    sys.exit(f"error: demo file {{demo_file(args.env, args.frame_skip, args.num_demo_samples)}} not found")
 if os.environ.get("FAKE_SLEEP"):
     with open(f"pid{{seed}}", "w") as file:
         file.write(str(os.getpid()))
@@ -39,20 +52,35 @@ if os.environ.get("FAKE_SLEEP"):
 if str(seed) == os.environ.get("FAKE_CRASH_SEED"):
     raise RuntimeError("boom")
 if str(seed) != os.environ.get("FAKE_SILENT_SEED"):
-    settings = dict(epochs=args.epochs, batch_size=64, obs_noise_std=0.2, history=2, learning_rate=None, num_demo_samples=None)
+    settings = dict(epochs=args.epochs, batch_size=64, obs_noise_std=0.2, history=2, learning_rate=None, num_demo_samples=args.num_demo_samples,
+                    frame_skip=args.frame_skip)
     result = make_result(args.env, METHOD, dict(env=args.env, seeds=[seed], **settings), {{seed: [[1, 0.0], [2, 10.0 * seed], [3, 10.0 * seed], [4, 10.0 * seed]]}})
     write_text(f"{{args.output_dir}}/result_seeds{{seed}}.json", json.dumps(result))
 '''
 
-FAKE_EXPERT = '''
+FAKE_EXPERT = f'''
+"""Stand-in expert_ppo.py: --eval-only prints an evaluation; --make-demos writes the demo file (logged in made.txt, in
+order; FAKE_DEMOS_FAIL refuses as the real one does)."""
+import os
 import sys
-import time
-from pathlib import Path
+{DEMO_FILE}
 env = sys.argv[sys.argv.index("--env") + 1]
+if "--make-demos" in sys.argv:
+    flag = lambda name: int(sys.argv[sys.argv.index(name) + 1]) if name in sys.argv else None
+    path = demo_file(env, flag("--frame-skip"), flag("--num-demo-samples"))
+    with open("made.txt", "a") as made:
+        made.write(" ".join(sys.argv[1:]) + "\\n")
+    if os.environ.get("FAKE_DEMOS_FAIL"):
+        sys.exit("error: planted refusal")
+    os.makedirs("demos", exist_ok=True)
+    open(path, "w").close()
+    print(f"generating demonstration steps -> {{path}}")
+    print(f"wrote {{path}}")
+    sys.exit(0)
 returns = [3000.0, 3100.0, 2900.0, 3200.0]
 for i, value in enumerate(returns):
-    print(f"episode {i}: return {value:.1f}")
-print(f"{env} expert: 3050.0 ± 111.8 over {len(returns)} episodes")
+    print(f"episode {{i}}: return {{value:.1f}}")
+print(f"{{env}} expert: 3050.0 ± 111.8 over {{len(returns)}} episodes")
 '''
 
 
@@ -76,6 +104,12 @@ def grid(scripts, results, *args):
 def calls(scripts) -> list:
     path = scripts / "calls.txt"
     return sorted(path.read_text().splitlines()) if path.exists() else []
+
+
+def demos_made(scripts) -> list:
+    """The flags of each `expert_ppo.py --make-demos` the grid ran, in order."""
+    path = scripts / "made.txt"
+    return path.read_text().splitlines() if path.exists() else []
 
 
 def plant(results, method, env, seed, returns, **settings):
@@ -113,12 +147,18 @@ def test_runner_skips_finished_runs_and_reruns_corrupt_or_stale_ones(scripts, tm
     assert re.search(r"re-run fake Hopper-v4 seed 4: corrupt result .*holds seeds \['5'\], expected \[4\]", out)
     assert calls(scripts) == ["Hopper-v4 2", "Hopper-v4 3", "Hopper-v4 4"]
     assert finished.read_text() == json_of_seed_1  # the finished run was left alone
+    record = run_grid.machine()
     for seed in (2, 3, 4):
-        assert read_result(result_path(results, "fake", "Hopper-v4", [seed]), "fake", "Hopper-v4", [seed])["mean"] == 10.0 * seed
-    assert (results / "fake" / "Hopper-v4" / "seed2.log").read_text().startswith("$ python fake.py --env Hopper-v4 --seeds 2")
+        result = read_result(result_path(results, "fake", "Hopper-v4", [seed]), "fake", "Hopper-v4", [seed])
+        assert result["mean"] == 10.0 * seed and result["machine"] == record  # the runner records where it ran
+    assert "machine" not in json.loads(finished.read_text())
+    log = (results / "fake" / "Hopper-v4" / "seed2.log").read_text().splitlines()
+    assert log[0].startswith("$ python fake.py --env Hopper-v4 --seeds 2") and json.loads(log[1].removeprefix("# machine: ")) == record
+    assert demos_made(scripts) == ["--env Hopper-v4 --make-demos"]  # once, for the three runs
 
     assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, 3, 4) == 0  # all done now
     assert "4 combinations, 4 done, 0 to run" in capsys.readouterr().out and len(calls(scripts)) == 3
+    assert len(demos_made(scripts)) == 1  # nothing to run: no demos made either
     # results made with --extra-args settings count as done for the same --extra-args, and only for them
     assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 7, "--extra-args", "--epochs 2") == 0
     assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "--seeds", 7, "--extra-args", "--epochs=2 --cuda", "--dry-run") == 0
@@ -162,6 +202,40 @@ def test_a_killed_grid_stops_its_runs_and_starts_no_more(scripts, tmp_path):
     assert calls(scripts) == ["Hopper-v4 1", "Hopper-v4 2"]  # seed 3 never started
 
 
+def test_the_demos_are_made_once_per_env_before_the_runs_with_their_settings(scripts, tmp_path, capsys):
+    alone = subprocess.run([sys.executable, "fake.py", "--env", "Ant-v4", "--seeds", "1", "--output-dir", str(tmp_path / "alone")],
+                           cwd=scripts, capture_output=True, text=True)
+    assert alone.returncode == 1 and "demo file demos/Ant-v4_10000.npz not found" in alone.stderr  # the stand-in needs its demos
+    (scripts / "calls.txt").unlink()
+    results, settings = tmp_path / "runs", "--num-demo-samples 300 --frame-skip=2"
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1, 2, "--extra-args", settings,
+                "--dry-run") == 0
+    out = capsys.readouterr().out
+    for env in ("Ant-v4", "Hopper-v4"):
+        assert f"demos {env}: (cd {scripts} && python expert_ppo.py --env {env} --make-demos --frame-skip 2 --num-demo-samples 300)" in out
+    assert demos_made(scripts) == [] and calls(scripts) == []  # a dry run only lists
+    assert grid(scripts, results, "--methods", "fake", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1, 2, "--extra-args", settings) == 0
+    out = capsys.readouterr().out
+    assert demos_made(scripts) == [f"--env {env} --make-demos --frame-skip 2 --num-demo-samples 300" for env in ("Ant-v4", "Hopper-v4")]
+    assert out.index("wrote demos/Hopper-v4_fs2_300.npz") < out.index("[1/4, ")  # made before the first run ended
+    for env in ("Hopper-v4", "Ant-v4"):
+        for seed in (1, 2):  # every run found its demo file (the stand-in refuses without it)
+            result = read_result(result_path(results, "fake", env, [seed]), "fake", env, [seed])
+            assert (result["args"]["num_demo_samples"], result["args"]["frame_skip"]) == (300, 2) and result["machine"] == run_grid.machine()
+    options = run_grid.parse_options(["--scripts-dir", str(scripts), "--results-dir", str(results), "--methods", "fake", "expert",
+                                      "--envs", "Hopper-v4", "--extra-args=--demos=mine.npz"])
+    assert run_grid.demo_commands(run_grid.combinations(options), options) == []  # the grid's own demo file: none to make
+    options.extra_args = []
+    assert run_grid.demo_commands([run_grid.Run("expert", "Hopper-v4", 0)], options) == []  # the expert loads no demos
+
+
+def test_a_grid_whose_demos_cannot_be_made_starts_no_run(scripts, tmp_path, monkeypatch):
+    monkeypatch.setenv("FAKE_DEMOS_FAIL", "1")
+    with pytest.raises(UsageError, match=re.escape("could not make the demos (expert_ppo.py --env Ant-v4 --make-demos): error: planted refusal")):
+        grid(scripts, tmp_path / "runs", "--methods", "fake", "--envs", "Hopper-v4", "Ant-v4", "--seeds", 1)
+    assert demos_made(scripts) == ["--env Ant-v4 --make-demos"] and calls(scripts) == []  # stopped at the first env, nothing ran
+
+
 def test_expert_is_evaluated_once_per_env_into_the_same_json_shape(scripts, tmp_path, capsys):
     results = tmp_path / "runs"
     assert grid(scripts, results, "--methods", "expert", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, "--expert-episodes", 4) == 0
@@ -187,6 +261,10 @@ def test_expert_command_is_one_the_real_expert_ppo_accepts(scripts, tmp_path):
     assert script == "expert_ppo.py"
     args = tyro.cli(expert_ppo.Args, args=flags)  # an unknown flag would exit 2 here
     assert (args.eval_only, args.env, args.checkpoint, args.eval_episodes) == (True, "Ant-v4", "experts/Ant-v4.pt", 7)
+    options.extra_args = ["--frame-skip", "2", "--num-demo-samples=300"]
+    (python, script, *flags), = run_grid.demo_commands([run_grid.Run("bc_oh", "Ant-v4", 1)], options)
+    args = tyro.cli(expert_ppo.Args, args=flags)
+    assert script == "expert_ppo.py" and (args.make_demos, args.env, args.frame_skip, args.num_demo_samples) == (True, "Ant-v4", 2, 300)
 
 
 def test_slurm_script_names_every_combination_exactly_once(scripts, tmp_path, capsys):

@@ -153,8 +153,8 @@ every method file copies them too."""
 
 
 def shared_plumbing():
-    """{name: original module} of bc_oh.py's blocks after its "# Shared plumbing" banner (plus evaluate): bc_oh
-    for its own, the module it copies from for the ones it copies itself (ExpertPolicy, load_expert)."""
+    """{name: original module} of bc_oh.py's blocks after its "# Shared plumbing" banner (plus evaluate and fit):
+    bc_oh for its own, the module it copies from for any it copies itself."""
     source = (REPO_ROOT / "bc_oh.py").read_text()
     banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# Shared plumbing"))
     names = {name for name, block in top_level_blocks(source).items() if block.start > banner} | SHARED_BEFORE_THE_BANNER
@@ -166,8 +166,11 @@ def test_every_method_file_is_checked():
     """Every method file carries checked copies of all of bc_oh's shared plumbing, so that the checker covers
     it: a block rewritten by hand in one file (no marker, or a marker lost) fails here."""
     plumbing = shared_plumbing()
-    assert {"run", "make_env", "load_or_generate_demos", "CudaGraphStep", "evaluate"} <= set(plumbing)
-    assert plumbing["load_expert"] == plumbing["ExpertPolicy"] == "expert_ppo"
+    assert {"run", "make_env", "load_demos", "job_eta", "require", "evaluate", "fit"} <= set(plumbing)
+    # the method files only load demos, and the harness records the machine: none of them carries these any more
+    gone = {"load_or_generate_demos", "generate_demos", "demo_meta", "load_expert", "ExpertPolicy", "CudaGraphStep",
+            "make_adam", "set_learning_rate", "machine", "write_atomically"}
+    assert not gone & set(plumbing), gone & set(plumbing)
     method_files = sorted(path.name for path in REPO_ROOT.glob("*.py") if re.search(r'^METHOD = "\w+"', path.read_text(), re.M))
     assert {"bc_oh.py", "bc_so.py", "c2f.py", "fca.py", "keyframe.py", "history_dropout.py", "average_ensemble.py", "dagger.py"} <= set(method_files)
     missing, problems = [], []
@@ -184,3 +187,17 @@ def test_every_method_file_is_checked():
                 missing.append(f"{file}: no '# Copied from {module}.{name}'" + (" (an unchecked version of its own)" if name in defined else ""))
     assert not problems, problems
     assert not missing, "\n".join(missing)
+
+
+def test_dagger_alone_queries_the_expert():
+    """DAgger's method asks the expert for labels: it keeps checked copies of expert_ppo's ExpertPolicy and
+    load_expert; the other method files no longer define them (they load demos that expert_ppo.py made)."""
+    method_files = sorted(path.name for path in REPO_ROOT.glob("*.py") if re.search(r'^METHOD = "\w+"', path.read_text(), re.M))
+    for file in method_files:
+        source = (REPO_ROOT / file).read_text()
+        copied = {(copy.orig_module, copy.orig_name) for copy in find_copies(file, source, [])}
+        defined = {"ExpertPolicy", "load_expert"} & set(top_level_blocks(source))
+        if file == "dagger.py":
+            assert {("expert_ppo", "ExpertPolicy"), ("expert_ppo", "load_expert")} <= copied
+        else:
+            assert not defined, f"{file} defines {sorted(defined)}"

@@ -1,4 +1,7 @@
-"""Tests of expert_ppo.py: a tiny training run, its checkpoint, resuming, evaluation and bad input."""
+"""Tests of expert_ppo.py: a tiny training run, its checkpoint, resuming, evaluation, --make-demos and bad input."""
+import contextlib
+import hashlib
+import json
 import re
 import shutil
 
@@ -8,7 +11,7 @@ import pytest
 import torch
 
 import expert_ppo
-from conftest import REPO_ROOT, assert_usage_error, run_in_process, run_script
+from conftest import REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
 
 TINY = ["--num-envs", 2, "--num-steps", 512, "--num-minibatches", 4, "--update-epochs", 1, "--eval-every-steps", 2048,
         "--save-every-steps", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]
@@ -116,7 +119,7 @@ def test_shipped_expert_scores_well():
     "args, message",
     [
         (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
-        (["--env", "CartPole-v1"], "has a Discrete action space"),
+        (["--env", "CartPole-v1"], "has Discrete actions: imitation here needs Box ones"),
         (["--eval-only", "--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
         (["--eval-only", "--checkpoint", "garbage.pt"], "garbage.pt is not a readable expert checkpoint"),
         (["--env", "Walker2d-v4", "--eval-only", "--checkpoint", "{tiny}"], "is an expert for Hopper-v4, not Walker2d-v4"),
@@ -271,7 +274,7 @@ def test_retarget_ships_an_expert_for_another_version_of_its_env(tmp_path):
     expert_ppo.load_expert(str(shipped), "Hopper-v5")  # accepted for v5 now
     for env, checkpoint_env in (("Walker2d-v5", "Hopper-v4"), ("HalfCheetah-v5", "Ant-v4")):
         refused = run_script("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
-        assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other observation and action shapes than {env}'s")
+        assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other shapes than {env}'s: train one for {env}")
     without = run_script("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
     assert_usage_error(without, "is an expert for Hopper-v4, not Hopper-v5")
 
@@ -289,3 +292,98 @@ def test_shipped_v5_experts_act_on_their_envs_observations():
     changed = obs.clone()
     changed[:, 27:] += 5.0  # the contact forces do not move Ant's expert
     assert torch.equal(policy(obs), policy(changed)) and not torch.equal(policy(obs), policy(obs * 2))
+
+
+# ----------------------------------------------------------------------------------------------
+# --make-demos: the demonstrations the imitation files load
+
+
+def make_demos_in(folder, capsys, **settings) -> str:
+    """expert_ppo.make_demos run in `folder` (the shipped experts linked there) on Hopper-v4; returns what it printed."""
+    with contextlib.chdir(folder):
+        expert_ppo.make_demos(expert_ppo.Args(env="Hopper-v4", make_demos=True, **settings))
+    return capsys.readouterr().out
+
+
+def demo_file(path) -> tuple:
+    with np.load(path, allow_pickle=False) as data:
+        return {key: data[key] for key in data.files if key != "meta"}, json.loads(str(data["meta"]))
+
+
+@pytest.fixture
+def demo_folder(tmp_path):
+    return link_experts(tmp_path, demos=False)
+
+
+def test_make_demos_writes_the_rollout_of_generate_demos_and_names_its_expert(demo_folder, capsys):
+    out = make_demos_in(demo_folder, capsys, num_demo_samples=120)
+    assert out.splitlines()[-1] == "wrote demos/Hopper-v4_120.npz"
+    demos, meta = demo_file(demo_folder / "demos" / "Hopper-v4_120.npz")
+    expected = expert_ppo.generate_demos("Hopper-v4", None, expert_ppo.load_expert(str(SHIPPED_EXPERT), "Hopper-v4"), 120)
+    assert set(demos) == set(expected)
+    for key, values in expected.items():  # seed 0, the same arrays (dtypes included)
+        assert demos[key].dtype == values.dtype, key
+        np.testing.assert_array_equal(demos[key], values, err_msg=key)
+    assert len(demos["actions"]) == 120 and demos["truncations"][-1]  # the budget ends the last episode
+    shipped = load(SHIPPED_EXPERT)
+    assert meta == {"env_id": "Hopper-v4", "source": "experts/Hopper-v4.pt", "num_samples": 120, "seed": 0, "frame_skip": 4,
+                    "expert_sha256": hashlib.sha256(SHIPPED_EXPERT.read_bytes()).hexdigest(),
+                    "expert_return": shipped["eval_return"], "expert_frame_skip": 4}
+    assert meta["expert_return"] > 3000 and not list((demo_folder / "demos").glob("*.tmp*"))
+
+
+def test_make_demos_names_its_file_by_frame_skip_and_sample_count(demo_folder, capsys, monkeypatch):
+    rollouts, generate = [], expert_ppo.generate_demos
+
+    def short_rollout(env_id, frame_skip, expert, num_samples, seed=0):  # the name of a default-sized file, in a blink
+        rollouts.append((env_id, frame_skip, num_samples))
+        return generate(env_id, frame_skip, expert, 30, seed)
+
+    monkeypatch.setattr(expert_ppo, "generate_demos", short_rollout)
+    for settings, name in [({"frame_skip": 1, "num_demo_samples": 120}, "Hopper-v4_fs1_120.npz"),
+                           ({"frame_skip": 4, "num_demo_samples": 120}, "Hopper-v4_120.npz"),  # the native rate: no _fs
+                           ({}, "Hopper-v4_20000.npz")]:  # the paper's count for Hopper
+        assert make_demos_in(demo_folder, capsys, **settings).splitlines()[-1] == f"wrote demos/{name}"
+        assert demo_file(demo_folder / "demos" / name)[1]["frame_skip"] == settings.get("frame_skip", 4)
+    assert rollouts == [("Hopper-v4", 1, 120), ("Hopper-v4", 4, 120), ("Hopper-v4", 4, 20000)]
+    assert sorted(path.name for path in (demo_folder / "demos").iterdir()) == ["Hopper-v4_120.npz", "Hopper-v4_20000.npz",
+                                                                                "Hopper-v4_fs1_120.npz"]
+    assert expert_ppo.demo_path("Walker2d-v4", 4, 4, 10000) == "demos/Walker2d-v4_10000.npz"
+
+
+def test_make_demos_keeps_a_file_of_the_same_expert_and_remakes_one_of_another(demo_folder, capsys, monkeypatch):
+    make_demos_in(demo_folder, capsys, num_demo_samples=120)
+    path = demo_folder / "demos" / "Hopper-v4_120.npz"
+    made, stamp = path.read_bytes(), path.stat().st_mtime_ns
+
+    def no_rollout(*args, **kwargs):
+        raise AssertionError("rolled the expert out again")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(expert_ppo, "generate_demos", no_rollout)
+        out = make_demos_in(demo_folder, capsys, num_demo_samples=120)
+    assert out.strip() == "demos/Hopper-v4_120.npz: already made from experts/Hopper-v4.pt with these settings"
+    assert path.read_bytes() == made and path.stat().st_mtime_ns == stamp  # kept, not rewritten
+    # another expert file (here the shipped one, its recorded return changed): the file is made again from it
+    other = load(SHIPPED_EXPERT)
+    other["eval_return"] += 1.0
+    torch.save(other, demo_folder / "other.pt")
+    out = make_demos_in(demo_folder, capsys, num_demo_samples=120, checkpoint="other.pt")
+    assert out.splitlines()[-1] == "wrote demos/Hopper-v4_120.npz"
+    demos, meta = demo_file(path)
+    assert meta["source"] == "other.pt" and meta["expert_sha256"] == hashlib.sha256((demo_folder / "other.pt").read_bytes()).hexdigest()
+    assert meta["expert_return"] == other["eval_return"] and path.read_bytes() != made
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--num-demo-samples", 1], "--num-demo-samples must be more than 1, got 1"),
+    (["--num-demo-samples", -3], "--num-demo-samples must be more than 1, got -3"),
+    (["--num-demo-samples", 0], "--num-demo-samples must be more than 1, got 0"),
+    (["--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
+    (["--env", "Walker2d-v4", "--checkpoint", SHIPPED_EXPERT], "is an expert for Hopper-v4, not Walker2d-v4"),
+], ids=["one-sample", "negative-samples", "missing-checkpoint", "other-env-checkpoint"])
+def test_make_demos_refuses_bad_input_in_one_line(args, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process("expert_ppo.py", "--make-demos", *args)
+    assert_usage_error(result, message)
+    assert result.returncode == 2 and not (tmp_path / "demos").exists()

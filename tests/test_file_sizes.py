@@ -3,15 +3,37 @@ import file_sizes
 from conftest import REPO_ROOT, assert_usage_error, run_script
 
 
-def test_the_table_counts_lines_and_diff_lines(tmp_path):
-    rows = {row.split(" | ")[0].strip("| `"): row for row in file_sizes.table().splitlines()[2:]}
-    assert set(rows) == {f"{name}.py" for name in file_sizes.TARGETS}
-    assert f"| {len((REPO_ROOT / 'bc_oh.py').read_text().splitlines())} (330) |" in rows["bc_oh.py"]
-    assert 0 < file_sizes.diff_lines("bc_so") < file_sizes.diff_lines("dagger")
+def test_the_table_has_a_row_per_method_file_and_the_anchors(tmp_path):
+    lines = file_sizes.table().splitlines()
+    assert lines[:2] == ["| file | formatted lines (target) | characters (target) | diff vs bc_oh.py (target) |", "|---|---:|---:|---:|"]
+    rows = {row.split(" | ")[0].strip("| `"): row.split(" | ")[1:] for row in lines[2:]}
+    assert set(rows) == {f"{name}.py" for name in file_sizes.TARGETS} | {"CleanRL `ppo_continuous_action.py` (for comparison)",
+                                                                       "CORL `any_percent_bc.py"}
+    text = file_sizes.formatted("bc_oh")
+    over = lambda value, most: ", over" if value > most else ""  # noqa: E731
+    assert rows["bc_oh.py"] == [f"{len(text.splitlines())} (400{over(len(text.splitlines()), 400)})",
+                                f"{len(text)} (18000{over(len(text), 18_000)})", "— |"]
+    diff = file_sizes.diff_lines("dagger")
+    assert rows["dagger.py"][2] == f"{diff} (150{over(diff, 150)}) |" and rows["dagger.py"][1].isdigit()  # no character target
+    assert 0 < file_sizes.diff_lines("bc_so") < diff
     page = tmp_path / "page.md"
     page.write_text("intro\n<!-- sizes -->\nold\n<!-- /sizes -->\nrest\n")
     file_sizes.main(["--page", str(page)])
     assert page.read_text() == "intro\n<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\nrest\n"
+
+
+def test_lines_and_characters_are_counted_formatted_and_copy_markers_are_no_diff(tmp_path, monkeypatch):
+    """A long line counts as the lines `ruff format` makes of it; a '# Copied from' marker is not a difference."""
+    long = "VALUES = [" + ", ".join(map(str, range(60))) + "]\n"  # 240 columns: ruff puts each entry on its own line
+    (tmp_path / "bc_oh.py").write_text("def f():\n    return 1\n" + long)
+    (tmp_path / "bc_so.py").write_text("# Copied from bc_oh.f\ndef f():\n    return 2\n" + long)
+    monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
+    monkeypatch.setattr(file_sizes, "TARGETS", {"bc_oh": (60, 500, None), "bc_so": (100, None, 2)})
+    formatted = "def f():\n    return 1\n\n\nVALUES = [\n" + "".join(f"    {n},\n" for n in range(60)) + "]\n"
+    assert file_sizes.formatted("bc_oh") == formatted
+    rows = file_sizes.table().splitlines()[2:4]
+    assert rows == [f"| `bc_oh.py` | 66 (60, over) | {len(formatted)} (500, over) | — |",
+                    f"| `bc_so.py` | 67 (100) | {len(formatted) + len('# Copied from bc_oh.f') + 1} | 2 (2) |"]  # return 1 -> return 2: one < and one >
 
 
 def test_a_bare_page_flag_writes_docs_contributing_md(tmp_path, monkeypatch):

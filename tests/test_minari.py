@@ -8,7 +8,7 @@ import pytest
 minari = pytest.importorskip("minari")
 import gymnasium as gym  # noqa: E402
 
-from conftest import assert_usage_error, run_script, tiny_args  # noqa: E402
+from conftest import assert_usage_error, make_demos, run_script, tiny_args  # noqa: E402
 
 KEYS = ("observations", "actions", "episode_starts", "rewards", "terminations", "truncations", "final_observations")
 
@@ -51,7 +51,7 @@ def make_dataset(dataset_id, episodes, env="Hopper-v4", **spaces):
 
 
 def as_demos(episodes):
-    """The episodes in the .npz layout (what generate_demos returns)."""
+    """The episodes in the .npz layout (what expert_ppo.generate_demos returns)."""
     return {"observations": np.concatenate([e["observations"][:-1] for e in episodes]).astype(np.float64),
             "actions": np.concatenate([e["actions"] for e in episodes]).astype(np.float32),
             "episode_starts": np.concatenate([np.arange(len(e["actions"])) == 0 for e in episodes]),
@@ -136,9 +136,22 @@ def test_imported_demos_load_in_bc_oh(tmp_path):
     episodes = rollout()
     make_dataset("test/hopper/random-v0", episodes)
     assert run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "demos.npz").returncode == 0
-    demos = bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos=str(tmp_path / "demos.npz")), bc_oh.make_env("Hopper-v4"))
-    np.testing.assert_array_equal(demos["observations"], as_demos(episodes)["observations"])
-    np.testing.assert_array_equal(demos["episode_starts"], as_demos(episodes)["episode_starts"])
+    args = tiny_args(bc_oh, demos=str(tmp_path / "demos.npz"), frame_skip=4)  # as run() resolves it: Hopper's own rate
+    demos, meta = bc_oh.load_demos(args, bc_oh.make_env("Hopper-v4"))
+    for key in ("observations", "actions", "episode_starts"):
+        np.testing.assert_array_equal(demos[key], as_demos(episodes)[key], err_msg=key)
+    assert meta["source"] == "minari:test/hopper/random-v0" and meta["frame_skip"] == 4
+
+
+def test_a_make_demos_file_goes_to_minari_and_back_unchanged(tmp_path):
+    """The demos the method files load (expert_ppo.py --make-demos, i.e. expert_ppo.generate_demos) export and
+    import back with the same arrays."""
+    made = make_demos("Hopper-v4", 120)
+    result = run_script("scripts/minari_demos.py", "export", made, "copycat/hopper/made-v0")
+    assert result.returncode == 0, result.stderr
+    result = run_script("scripts/minari_demos.py", "import", "copycat/hopper/made-v0", tmp_path / "back.npz")
+    assert result.returncode == 0, result.stderr
+    assert_same_demos(load_npz(tmp_path / "back.npz"), load_npz(made))
 
 
 def refused(result, expected):
@@ -171,7 +184,7 @@ def test_refusals(tmp_path):
     old = {key: demos[key] for key in ("observations", "actions", "episode_starts")}  # made before rewards were kept
     np.savez(tmp_path / "old.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 4})), **old)
     result = run_script("scripts/minari_demos.py", "export", tmp_path / "old.npz", "test/old-v0")
-    refused(result, "delete the cached demos/<env>_<N>.npz file and rerun any method script")
+    refused(result, "make it again with `python expert_ppo.py --env <env> --make-demos`")
     np.savez(tmp_path / "fs1.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 1})), **demos)
     refused(run_script("scripts/minari_demos.py", "export", tmp_path / "fs1.npz", "test/fs1-v0"), "frame skip 1")
     np.savez(tmp_path / "new.npz", **demos)
@@ -196,7 +209,7 @@ def test_the_import_goes_through_the_method_files_loader(tmp_path, monkeypatch, 
         seen.append((args.demos, args.env, args.frame_skip))
         raise bc_oh.UsageError("planted refusal")
 
-    monkeypatch.setattr(bc_oh, "load_or_generate_demos", refusing_loader)
+    monkeypatch.setattr(bc_oh, "load_demos", refusing_loader)
     with pytest.raises(SystemExit) as stop:
         minari_demos.run_cli(lambda: minari_demos.main(["import", "test/hopper/random-v0", str(tmp_path / "x.npz")]))
     assert stop.value.code == 2 and "the method files would refuse this import (planted refusal)" in capsys.readouterr().err

@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 import torch
-from conftest import assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
+from conftest import (REPO_ROOT, assert_usage_error, fake_demos, link_experts, load_demos, make_demos, run_in_process, skip_evaluation,
+                      tiny_args)
 
 import bc_oh
 import c2f
@@ -32,13 +33,12 @@ def bad_demos(tmp_path):
 
 
 CASES = {
-    "another env's demos": (["--demos", "walker.npz"], "walker.npz holds demos of Walker2d-v4, not Hopper-v4: pass --env Walker2d-v4, or demos of Hopper-v4"),
-    "another version's demos": (["--env", "Hopper-v5", "--demos", "v4.npz"], "v4.npz holds demos of Hopper-v4, not Hopper-v5: "),
-    "actions out of bounds": (["--demos", "scaled.npz"], "scaled.npz: actions[0, 0] = "),
-    "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False, but the first step starts an episode: "),
-    "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError: Object arrays cannot be loaded "
-                                                  "when allow_pickle=False): see the .npz format in README.md, or save the arrays with np.savez"),
-    "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "--num-demo-samples 500, but v4.npz holds 200 steps: pass at most 200"),
+    "another env's demos": (["--demos", "walker.npz"], "walker.npz holds demos of Walker2d-v4: pass --env Walker2d-v4, or demos of Hopper-v4"),
+    "another version's demos": (["--env", "Hopper-v5", "--demos", "v4.npz"], "v4.npz holds demos of Hopper-v4: pass --env Hopper-v4, or demos of Hopper-v5"),
+    "actions out of bounds": (["--demos", "scaled.npz"], "scaled.npz: actions of rows [0"),  # the first offending row first
+    "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False: it is True on each episode's first step"),
+    "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError): see the format in README.md"),
+    "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "v4.npz holds 200 steps: pass --num-demo-samples 200 or fewer"),
 }
 
 
@@ -52,22 +52,24 @@ def test_a_mistake_in_the_demos_is_refused_in_one_line(case, script, tmp_path, m
     assert_usage_error(result, message)
 
 
-def test_actions_out_of_bounds_name_their_row_column_and_bounds(tmp_path, monkeypatch):
+def test_actions_out_of_bounds_name_their_rows(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     demos = fake_demos(200)
     demos["actions"][:] = 0.5
-    demos["actions"][7, 2] = 1.25
+    demos["actions"][7, 2], demos["actions"][150, 0] = 1.25, -1.5  # just outside [-1, 1], below and above
     save_demos(tmp_path / "one.npz", demos)
     result = run_in_process("bc_oh.py", "--demos", "one.npz", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "one.npz: actions[7, 2] = 1.25 lies outside Hopper-v4's bounds [-1, 1]: clip or rescale")
+    assert_usage_error(result, "one.npz: actions of rows [7, 150] lie outside the env's bounds: clip")
 
 
-def test_a_users_unreadable_file_gets_numpys_reason_and_no_advice_to_delete_it(tmp_path, monkeypatch):
+def test_a_users_unreadable_file_gets_no_advice_to_delete_or_unpickle_it(tmp_path, monkeypatch):
+    """A file that is no .npz (numpy reads it as a pickle) is the user's own: not to be deleted, and not to be loaded with
+    allow_pickle, which numpy's own message suggests."""
     monkeypatch.chdir(tmp_path)
     (tmp_path / "mine.npz").write_bytes(b"not a zip")
     result = run_in_process("bc_oh.py", "--demos", "mine.npz", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "mine.npz is not a readable demo file (ValueError: This file contains pickled (object) data. ")
-    assert "save the arrays with np.savez" in result.stderr and "delete it" not in result.stderr
+    assert_usage_error(result, "mine.npz is not a readable demo file (ValueError): see the format in README.md")
+    assert "delete" not in result.stderr and "allow_pickle" not in result.stderr
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the refusal on a machine without a GPU")
@@ -75,30 +77,30 @@ def test_a_users_unreadable_file_gets_numpys_reason_and_no_advice_to_delete_it(t
 def test_cuda_without_a_gpu_is_refused(script, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = run_in_process(script, "--cuda", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "--cuda, but torch sees no CUDA GPU here (torch.cuda.is_available() is False): drop --cuda to train on the CPU")
+    assert_usage_error(result, "--cuda, but torch sees no CUDA GPU here: drop --cuda")
 
 
-def test_num_demo_samples_with_demos_takes_the_first_steps_and_says_so(tmp_path, monkeypatch):
+def test_num_demo_samples_with_demos_takes_the_first_steps(tmp_path, monkeypatch):
     demos = fake_demos(300)
     save_demos(tmp_path / "d.npz", demos)
-    args = tiny_args(bc_oh, demos=str(tmp_path / "d.npz"), num_demo_samples=120)
     monkeypatch.chdir(tmp_path)
-    taken = bc_oh.load_or_generate_demos(args, bc_oh.make_env("Hopper-v4"))
+    taken, _ = load_demos(bc_oh, demos=str(tmp_path / "d.npz"), num_demo_samples=120)
     assert len(taken["actions"]) == 120 and np.array_equal(taken["observations"], demos["observations"][:120])
+    assert np.array_equal(taken["actions"], demos["actions"][:120]) and np.array_equal(taken["episode_starts"], demos["episode_starts"][:120])
 
 
 def test_num_demo_samples_with_demos_is_printed(tmp_path, monkeypatch, capsys):
     save_demos(tmp_path / "d.npz", fake_demos(300))
     monkeypatch.chdir(tmp_path)
-    bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos="d.npz", num_demo_samples=120), bc_oh.make_env("Hopper-v4"))
-    out = capsys.readouterr().out
-    assert "--num-demo-samples 120: the first 120 of the 300 steps in d.npz" in out and "demos: 120 steps from d.npz" in out
+    load_demos(bc_oh, demos="d.npz", num_demo_samples=120)
+    assert capsys.readouterr().out.startswith("demos: 120 steps from d.npz; copy error ")
 
 
 def test_a_file_without_meta_still_loads(tmp_path, monkeypatch):
     save_demos(tmp_path / "d.npz", fake_demos(200))
     monkeypatch.chdir(tmp_path)
-    assert len(bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos="d.npz"), bc_oh.make_env("Hopper-v4"))["actions"]) == 200
+    demos, meta = load_demos(bc_oh, demos="d.npz")
+    assert len(demos["actions"]) == 200 and meta == {}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -146,15 +148,16 @@ def test_each_seed_is_written_when_it_ends_and_a_rerun_keeps_it(tmp_path, monkey
     save_demos(tmp_path / "d.npz", fake_demos(256))
     monkeypatch.chdir(link_experts(tmp_path))
     extra = dict(dagger_samples=40, dagger_rounds=1, dagger_epochs=1) if module is dagger else {}
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(SystemExit) as interrupted_run:
         module.run(tiny_args(module, demos="d.npz", learning_rate=None, seeds=[1, 2], **extra))
+    assert interrupted_run.value.code == "interrupted: seeds 1 finished and kept, 2 lost: the same command trains only those"
     (folder,) = (tmp_path / "runs").glob("*/Hopper-v4")
     assert sorted(path.name for path in folder.glob("*.json")) == ["result_seeds1.json"], "seed 1 is kept, no combined result yet"
     first = json.loads((folder / "result_seeds1.json").read_text())
     assert first["args"]["seeds"] == [1] and list(first["scores"]) == ["1"]
     monkeypatch.setattr(module, "train_seed", train_seed)
     assert run_in(tmp_path, module, monkeypatch, seeds=[1, 2], **extra) == [2], "the rerun trains only the unfinished seed"
-    assert f"seed 1: kept its finished result {folder.relative_to(tmp_path)}/result_seeds1.json" in capsys.readouterr().out
+    assert f"seeds 1: kept their finished results in {folder.relative_to(tmp_path)} (delete to retrain)" in capsys.readouterr().out
     both = json.loads((folder / "result_seeds1-2.json").read_text())
     assert both["scores"]["1"] == first["scores"]["1"] and list(both["scores"]) == ["1", "2"]
 
@@ -165,10 +168,20 @@ def test_a_seed_made_with_other_settings_is_trained_again(tmp_path, monkeypatch)
     assert run_in(tmp_path, bc_oh, monkeypatch, output_dir="out", hidden=16) == [1], "same folder, other settings: trained again"
 
 
+def demo_meta(path) -> dict:
+    with np.load(path, allow_pickle=False) as data:
+        return json.loads(str(data["meta"]))
+
+
 def test_the_summary_line_gives_the_share_of_the_experts_return(tmp_path, monkeypatch):
-    args = tiny_args(bc_oh)
-    monkeypatch.chdir(link_experts(tmp_path))
-    expert = torch.load("experts/Hopper-v4.pt", weights_only=True)["eval_return"]
-    assert bc_oh.summary_line(args, [expert * 0.4, expert * 0.42]) == \
+    """The share comes from the expert's return that expert_ppo.py --make-demos recorded in the demos' meta."""
+    meta = demo_meta(make_demos("Hopper-v4", 300))
+    expert = torch.load(REPO_ROOT / "experts" / "Hopper-v4.pt", weights_only=True)["eval_return"]
+    assert (meta["expert_return"], meta["expert_frame_skip"]) == (expert, 4)
+    assert bc_oh.summary_line(tiny_args(bc_oh, frame_skip=4), [expert * 0.4, expert * 0.42], meta) == \
         f"Hopper-v4 bc_oh: {expert * 0.41:.1f} ± {expert * 0.01:.1f} over 2 seeds, 41% of the expert's {expert:.0f}"
-    assert bc_oh.summary_line(tiny_args(bc_oh, expert="none.pt"), [1.0]) == "Hopper-v4 bc_oh: 1.0 ± 0.0 over 1 seed"
+    fast = demo_meta(make_demos("Hopper-v4", 300, 1))  # the same expert, rolled out at frame skip 1
+    assert bc_oh.summary_line(tiny_args(bc_oh, frame_skip=1), [expert * 0.5], fast) == \
+        f"Hopper-v4 bc_oh: {expert * 0.5:.1f} ± 0.0 over 1 seed, 50% of the expert's {expert:.0f} at its own frame skip 4"
+    assert bc_oh.summary_line(tiny_args(bc_oh, frame_skip=4), [1.0], {}) == "Hopper-v4 bc_oh: 1.0 ± 0.0 over 1 seed", \
+        "demos of no recorded expert (e.g. a user's file): no share"
