@@ -102,3 +102,28 @@ def test_error_messages_name_only_flags_the_script_has(script):
     for other, flags in quoted.items():
         assert (REPO_ROOT / f"{other}.py").is_file(), f"{script} quotes a command of {other}.py, which is not in the repo"
         assert flags <= args_fields(other), f"{script} quotes {other}.py with flags it does not have: {sorted(flags - args_fields(other))}"
+
+
+METHOD_FILES = ["bc_so.py", "bc_oh.py", "c2f.py", "fca.py", "keyframe.py", "history_dropout.py", "average_ensemble.py", "dagger.py"]
+
+
+@pytest.mark.parametrize("script", METHOD_FILES)
+def test_a_method_file_trains_alone_in_an_empty_folder_with_its_demo_file(script, tmp_path):
+    """What a user who copies one file does: the file and the demo file it loads (DAgger also its expert, which it
+    queries), nothing else of this repo on the path; a tiny run ends with its summary line and its result."""
+    from conftest import make_demos
+
+    shutil.copy(REPO_ROOT / script, tmp_path / script)
+    (tmp_path / "demos").mkdir()
+    shutil.copy(make_demos("Hopper-v4", 120), tmp_path / "demos" / "Hopper-v4_120.npz")
+    if script == "dagger.py":
+        (tmp_path / "experts").mkdir()
+        shutil.copy(REPO_ROOT / "experts" / "Hopper-v4.pt", tmp_path / "experts" / "Hopper-v4.pt")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    budget = ["--seeds", "1", "--epochs", "1", "--eval-every", "1", "--eval-episodes", "1", "--num-demo-samples", "120",
+              "--batch-size", "32", *(["--dagger-samples", "20", "--dagger-rounds", "1", "--dagger-epochs", "1"] if script == "dagger.py" else [])]
+    result = subprocess.run([sys.executable, script, *budget], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1].startswith(f"Hopper-v4 {script.removesuffix('.py')}: ")
+    (result_file,) = tmp_path.glob("runs/*/Hopper-v4/result_seeds1.json")
+    assert set(os.listdir(tmp_path)) == {script, "demos", "runs", *(["experts"] if script == "dagger.py" else [])}
