@@ -412,7 +412,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     path = args.demos or f"demos/{args.env}{'' if rate == native else f'_fs{rate}'}_{n}.npz"
     make = f"python expert_ppo.py --env {args.env} --make-demos{f' --frame-skip {rate}' * (rate != native)}"
     make += f" --num-demo-samples {n}" * bool(args.num_demo_samples)
-    require(os.path.isfile(path), f"demo file {path} not found: " + ("check the path" if args.demos else f"run {make}"))
+    where = f"demo file {path} not found in {os.getcwd()}"  # relative paths: the repository root holds demos/
+    require(os.path.isfile(path), f"{where}: " + ("check the path" if args.demos else f"run {make}"))
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"])) if "meta" in data else {}
@@ -429,23 +430,27 @@ def load_demos(args, env: gym.Env) -> tuple:
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
     shapes = (
-        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}), (N, {act_dim})"
     )
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
     held = f"{path} holds {len(obs)} steps"
     require(len(obs) >= (args.num_demo_samples or 0), f"{held}: pass --num-demo-samples {len(obs)} or fewer")
-    obs, actions, starts = obs[:n].astype(np.float64), actions[:n].astype(np.float32), starts[:n].astype(bool)
+    take = args.num_demo_samples or len(obs)  # with --demos: the first N steps, or all
+    first = f" (the first {take} of its {len(obs)})" * (take < len(obs))
+    obs, actions, starts = obs[:take].astype(np.float64), actions[:take].astype(np.float32), starts[:take].astype(bool)
     require(len(obs) > args.batch_size, f"{held}, not more than a batch: use more, or a smaller --batch-size")
     for key, values in (("observations", obs), ("actions", actions)):
-        bad = np.argwhere(~np.isfinite(values))
-        require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3, 0].tolist()}: fix or drop them")
-    outside = np.argwhere((actions < env.action_space.low) | (actions > env.action_space.high))
-    require(not len(outside), f"{path}: actions of rows {outside[:3, 0].tolist()} lie outside the env's bounds: clip")
+        bad = np.unique(np.argwhere(~np.isfinite(values))[:, 0])  # each row once
+        require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3].tolist()}: fix or drop them")
+    low, high = env.action_space.low, env.action_space.high
+    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
+    bounds = f"outside the bounds [{low.min():g}, {high.max():g}]"
+    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} lie {bounds}: rescale or clip them")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
     shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
-    print(f"demos: {len(obs)} steps from {path}; {shortcut} (near 0 means copying the last action is a shortcut)")
+    print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 

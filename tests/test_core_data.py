@@ -1,10 +1,11 @@
 """The data pipeline every method shares (bc_oh.py holds the originals; check_copies keeps the copies equal):
-noise on the velocities, history stacking in training and evaluation, demo generation and caching.
-Bad input is tested through the command line in test_core_scripts.py."""
+noise on the velocities, history stacking in training and evaluation, the demos expert_ppo.py generates (--make-demos,
+remade when its expert changes) and the method files load. Bad input is tested through the command line in
+test_core_scripts.py and test_trust.py."""
 import hashlib
 import json
 import os
-from pathlib import Path
+import shutil
 
 import gymnasium as gym
 import numpy as np
@@ -12,7 +13,8 @@ import pytest
 import torch
 
 import bc_oh
-from conftest import REPO_ROOT, tiny_args
+import expert_ppo
+from conftest import REPO_ROOT, link_experts, load_demos, make_demos, run_in_process, tiny_args
 
 HOPPER_VELOCITIES = list(range(5, 11))
 POSITIONS = list(range(0, 5))
@@ -103,68 +105,69 @@ def test_evaluation_feeds_the_policy_the_history_of_stack_history():
 
 
 def hopper_expert():
-    return bc_oh.load_expert(str(REPO_ROOT / "experts" / "Hopper-v4.pt"), "Hopper-v4")
+    return expert_ppo.load_expert(str(REPO_ROOT / "experts" / "Hopper-v4.pt"), "Hopper-v4")
 
 
 def test_demo_generation_is_deterministic():
-    first = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 150)
-    second = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 150)
+    first = expert_ppo.generate_demos("Hopper-v4", None, hopper_expert(), 150)
+    second = expert_ppo.generate_demos("Hopper-v4", None, hopper_expert(), 150)
     for key in ("observations", "actions", "episode_starts"):
         assert np.array_equal(first[key], second[key]), key
     assert first["observations"].shape == (150, 11) and first["actions"].shape == (150, 3)
     assert first["episode_starts"][0] and np.abs(first["actions"]).max() <= 1.0
 
 
-def test_demo_cache_round_trips(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    args = tiny_args(bc_oh, num_demo_samples=120, expert=str(REPO_ROOT / "experts" / "{env}.pt"))
-    env = gym.make("Hopper-v4")
-    demos = bc_oh.load_or_generate_demos(args, env)
-    cache = tmp_path / "demos" / "Hopper-v4_120.npz"
-    with np.load(cache) as saved:
-        for key in ("observations", "actions", "episode_starts"):
-            assert np.array_equal(saved[key], demos[key]), key
-        assert '"env_id": "Hopper-v4"' in str(saved["meta"])
-    assert list((tmp_path / "demos").iterdir()) == [cache], "no temporary file left behind"
+def saved(path) -> tuple:
+    """(arrays, meta) of a demo file."""
+    with np.load(path, allow_pickle=False) as data:
+        return {key: data[key] for key in data.files if key != "meta"}, json.loads(str(data["meta"]))
 
-    def must_not_run(*_):
-        raise AssertionError("the cached demos were generated again")
 
-    monkeypatch.setattr(bc_oh, "generate_demos", must_not_run)
-    again = bc_oh.load_or_generate_demos(args, env)
+def test_the_made_demo_file_loads_as_it_was_written(tmp_path, monkeypatch):
+    """load_demos finds the file `expert_ppo.py --make-demos` wrote under the name it looks for, and returns its arrays
+    and meta unchanged; the same file through --demos loads the same."""
+    arrays, meta = saved(make_demos("Hopper-v4", 120))
+    monkeypatch.chdir(link_experts(tmp_path))
+    demos, loaded_meta = load_demos(bc_oh, num_demo_samples=120)
+    for key in ("observations", "actions", "episode_starts"):
+        assert demos[key].dtype == arrays[key].dtype and np.array_equal(demos[key], arrays[key]), key
+    assert loaded_meta == meta and meta["env_id"] == "Hopper-v4" and meta["num_samples"] == 120
+    again, _ = load_demos(bc_oh, demos=str(make_demos("Hopper-v4", 120)))
     assert all(np.array_equal(again[key], demos[key]) for key in demos)
-    args.demos = str(cache)  # the same file through --demos
-    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], demos["actions"])
 
 
-def test_demo_cache_follows_its_expert(tmp_path, monkeypatch):
-    """A cache rolled out by one expert is not reused for another (or a retrained one at the same path);
-    without any expert file to compare with, the cache is used as it is."""
-    import shutil
+def make_demos_here(*flags):
+    """`python expert_ppo.py --make-demos --num-demo-samples 120 --checkpoint expert.pt FLAGS` in this process; returns
+    its last line of output."""
+    result = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 120, "--checkpoint", "expert.pt", *flags)
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+    return result.stdout.splitlines()[-1]
 
-    import torch
 
+def test_demos_follow_their_expert(tmp_path, monkeypatch):
+    """expert_ppo.py --make-demos keeps a file rolled out by the same expert file, and rolls out again for an expert
+    retrained at the same path (the meta holds the expert's SHA-256, not only its path); the method files need no
+    expert at all to load the file."""
     monkeypatch.chdir(tmp_path)
     shutil.copy(REPO_ROOT / "experts" / "Hopper-v4.pt", tmp_path / "expert.pt")
-    args = tiny_args(bc_oh, num_demo_samples=120, expert="expert.pt")
-    env = gym.make("Hopper-v4")
-    first = bc_oh.load_or_generate_demos(args, env)
-    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
-        assert json.loads(str(saved["meta"]))["expert_sha256"] == hashlib.sha256(Path("expert.pt").read_bytes()).hexdigest()
+    path = tmp_path / "demos" / "Hopper-v4_120.npz"
+    assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
+    first, meta = saved(path)
+    assert meta["expert_sha256"] == hashlib.sha256((tmp_path / "expert.pt").read_bytes()).hexdigest()
+    stamp = path.stat().st_mtime_ns
+    assert make_demos_here() == "demos/Hopper-v4_120.npz: already made from expert.pt with these settings"
+    assert path.stat().st_mtime_ns == stamp, "kept, not rewritten"
 
     checkpoint = torch.load("expert.pt", weights_only=True)  # "retrain" it: other weights, same path
     checkpoint["actor"] = {key: value + 0.05 for key, value in checkpoint["actor"].items()}
     torch.save(checkpoint, "expert.pt")
-    retrained = bc_oh.load_or_generate_demos(args, env)
-    assert not np.array_equal(retrained["actions"], first["actions"]), "the old expert's demos were reused"
+    assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
+    retrained, meta = saved(path)
+    assert meta["expert_sha256"] == hashlib.sha256((tmp_path / "expert.pt").read_bytes()).hexdigest()
+    assert not np.array_equal(retrained["actions"], first["actions"]), "the old expert's demos were kept"
 
-    def must_not_run(*_):
-        raise AssertionError("the cached demos were generated again")
-
-    monkeypatch.setattr(bc_oh, "generate_demos", must_not_run)
-    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
-    os.remove("expert.pt")  # demos copied without their expert: used as they are
-    assert np.array_equal(bc_oh.load_or_generate_demos(args, env)["actions"], retrained["actions"])
+    os.remove("expert.pt")  # demos copied without their expert: loaded as they are
+    assert np.array_equal(load_demos(bc_oh, num_demo_samples=120)[0]["actions"], retrained["actions"])
 
 
 def test_mujoco_deprecation_warning_of_halfcheetah_is_dropped_and_others_kept(tmp_path, monkeypatch, capfd):
@@ -196,7 +199,7 @@ def user_demo_file(tmp_path, drop=None, **arrays):
 
 
 def load_user_demos(path):
-    return bc_oh.load_or_generate_demos(tiny_args(bc_oh, demos=path), bc_oh.make_env("Hopper-v4"))
+    return load_demos(bc_oh, demos=path)[0]
 
 
 def test_demos_of_any_real_dtype_are_converted(tmp_path):
@@ -210,28 +213,28 @@ def test_demos_of_any_real_dtype_are_converted(tmp_path):
 
 
 @pytest.mark.parametrize("key, row, column", [("observations", 17, 4), ("actions", 150, 2)])
-def test_a_non_finite_demo_value_is_refused_with_its_place(tmp_path, key, row, column):
+def test_a_non_finite_demo_value_is_refused_with_its_row(tmp_path, key, row, column):
     rng = np.random.default_rng(0)
-    values = rng.normal(size=(200, 11 if key == "observations" else 3))
+    values = rng.uniform(-1, 1, size=(200, 11 if key == "observations" else 3))  # within the action bounds
     values[row, column] = np.nan
-    with pytest.raises(bc_oh.UsageError, match=rf"{key} has the non-finite value nan at row {row}, column {column}"):
+    with pytest.raises(bc_oh.UsageError, match=rf"user.npz: {key} hold non-finite values at rows \[{row}\]: fix or drop them$"):
         load_user_demos(user_demo_file(tmp_path, **{key: values}))
 
 
-def test_a_missing_demo_array_is_named_with_its_meaning(tmp_path):
-    with pytest.raises(bc_oh.UsageError, match=r"has no 'episode_starts' array \(True where an episode starts, \(N,\)\)"):
+def test_a_missing_demo_array_is_named(tmp_path):
+    with pytest.raises(bc_oh.UsageError, match=r"user.npz has no 'episode_starts' array: see the .npz format in README.md$"):
         load_user_demos(user_demo_file(tmp_path, drop="episode_starts"))
 
 
 def test_demos_of_text_are_refused(tmp_path):
-    with pytest.raises(bc_oh.UsageError, match="actions hold <U1 values, not real numbers"):
+    with pytest.raises(bc_oh.UsageError, match="user.npz: actions hold <U1 values: save them as numbers$"):
         load_user_demos(user_demo_file(tmp_path, actions=np.full((200, 3), "a")))
 
 
 def test_demos_record_what_a_dataset_format_needs():
     """Rewards, terminations and truncations per step, and each episode's final observation: an episode
     ends exactly where the next starts, and the budget truncates the last one."""
-    demos = bc_oh.generate_demos("Hopper-v4", None, hopper_expert(), 1200)
+    demos = expert_ppo.generate_demos("Hopper-v4", None, hopper_expert(), 1200)
     ends = demos["terminations"] | demos["truncations"]
     assert np.array_equal(ends[:-1], demos["episode_starts"][1:]) and ends[-1] and demos["truncations"][-1]
     assert len(demos["final_observations"]) == ends.sum() == demos["episode_starts"].sum()

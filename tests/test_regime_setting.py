@@ -1,6 +1,6 @@
 """The shared setting of the copycat regime map (bc_oh.py holds the originals): the control rate
-(--frame-skip), positions-only observations (--hide-velocities), the copy-error line, demo caches per
-rate; and C2F's output fusion (--fusion output)."""
+(--frame-skip), positions-only observations (--hide-velocities), the copy-error line, demo files per
+rate (made by expert_ppo.py --make-demos, loaded by the method files); and C2F's output fusion (--fusion output)."""
 import argparse
 import json
 
@@ -11,7 +11,8 @@ import torch
 
 import bc_oh
 import c2f
-from conftest import REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_script, tiny_args
+from conftest import (assert_usage_error, fake_demos, link_experts, load_demos, make_demos, run_in_process, run_script,
+                      tiny_args)
 
 HOPPER_VELOCITIES = list(range(5, 11))
 POSITIONS = list(range(0, 5))
@@ -121,34 +122,52 @@ def test_copy_error_against_hand_computed_values():
 # Demo caches per rate
 
 
-def cache_args(**overrides):
-    return tiny_args(bc_oh, num_demo_samples=120, expert=str(REPO_ROOT / "experts" / "{env}.pt"), **overrides)
+def meta_of(path) -> dict:
+    with np.load(path, allow_pickle=False) as data:
+        return json.loads(str(data["meta"]))
 
 
-def test_demo_cache_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    env = bc_oh.make_env("Hopper-v4")
-    fast = bc_oh.load_or_generate_demos(cache_args(frame_skip=1), env)
+def test_demos_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
+    """The method file loads, at --frame-skip 1, the file --make-demos wrote at that rate, and says its copy error."""
+    monkeypatch.chdir(link_experts(tmp_path))
+    fast, meta = load_demos(bc_oh, num_demo_samples=120, frame_skip=1)
     line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("demos:"))
+    assert line.startswith("demos: 120 steps from demos/Hopper-v4_fs1_120.npz; ")
     assert f"copy error MSE(a_t-1, a_t)/Var(a) = {bc_oh.copy_error(fast['actions'], fast['episode_starts']):.3f}" in line
-    with np.load(tmp_path / "demos" / "Hopper-v4_fs1_120.npz") as saved:
-        assert json.loads(str(saved["meta"]))["frame_skip"] == 1
-    native = bc_oh.load_or_generate_demos(cache_args(), env)
-    assert (tmp_path / "demos" / "Hopper-v4_120.npz").is_file()
+    assert meta["frame_skip"] == 1 and meta == meta_of(make_demos("Hopper-v4", 120, 1))
+    native, meta = load_demos(bc_oh, num_demo_samples=120)
+    assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz; " in capsys.readouterr().out
     assert not np.array_equal(native["observations"], fast["observations"])
     assert bc_oh.copy_error(fast["actions"], fast["episode_starts"]) < bc_oh.copy_error(native["actions"], native["episode_starts"])
 
 
-def test_a_cache_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    env = bc_oh.make_env("Hopper-v4")
-    fast = bc_oh.load_or_generate_demos(cache_args(frame_skip=1), env)
-    # the native cache path holding demos recorded at frame skip 1 is rolled out again
+def test_a_file_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
+    """A file at the native name that holds demos recorded at frame skip 1: the method file refuses it, and
+    expert_ppo.py --make-demos rolls the native demos out again instead of keeping it."""
+    monkeypatch.chdir(link_experts(tmp_path, demos=False))
+    made = run_in_process("expert_ppo.py", "--make-demos", "--frame-skip", 1, "--num-demo-samples", 120)
+    assert made.returncode == 0 and made.stdout.splitlines()[-1] == "wrote demos/Hopper-v4_fs1_120.npz", made.stderr
+    with np.load("demos/Hopper-v4_fs1_120.npz") as saved:
+        fast = saved["observations"]
     (tmp_path / "demos" / "Hopper-v4_fs1_120.npz").rename(tmp_path / "demos" / "Hopper-v4_120.npz")
-    native = bc_oh.load_or_generate_demos(cache_args(), env)
-    assert not np.array_equal(native["observations"], fast["observations"])
-    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
-        assert json.loads(str(saved["meta"]))["frame_skip"] == 4
+    with pytest.raises(bc_oh.UsageError, match=r"^demos/Hopper-v4_120.npz was made at frame skip 1, not 4: pass --frame-skip 1$"):
+        load_demos(bc_oh, num_demo_samples=120)
+    again = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 120)
+    assert again.returncode == 0 and again.stdout.splitlines()[-1] == "wrote demos/Hopper-v4_120.npz", again.stderr
+    native, meta = load_demos(bc_oh, num_demo_samples=120)
+    assert meta["frame_skip"] == 4 and not np.array_equal(native["observations"], fast)
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--frame-skip", 0], "--frame-skip must be positive, got 0: e.g. 1, or leave it out for the env's own"),
+    (["--frame-skip", -2], "--frame-skip must be positive, got -2: "),
+    (["--env", "Pendulum-v1", "--frame-skip", 1], "env 'Pendulum-v1' is not a MuJoCo env: --frame-skip needs one, leave it out"),
+], ids=["zero", "negative", "not-mujoco"])
+def test_make_demos_refuses_a_frame_skip_the_env_cannot_take(flags, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(link_experts(tmp_path, demos=False))
+    result = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 120, *flags)
+    assert_usage_error(result, message)
+    assert result.returncode == 2 and not (tmp_path / "demos").exists(), "refused before any rollout"
 
 
 def test_demos_of_another_rate_are_refused(tmp_path):
@@ -156,8 +175,9 @@ def test_demos_of_another_rate_are_refused(tmp_path):
     made = run_script("bc_oh.py", "--frame-skip", "1", "--num-demo-samples", 120, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
                       "--seeds", 1, "--output-dir", tmp_path / "out", cwd=tmp_path)
     assert made.returncode == 0, made.stderr
+    assert made.stdout.splitlines()[-1].endswith(" at its own frame skip 4"), "the expert's return is that of its own rate"
     result = run_script("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1, cwd=tmp_path)
-    assert_usage_error(result, "recorded at frame skip 1, this run is at 4")
+    assert_usage_error(result, "Hopper-v4_fs1_120.npz was made at frame skip 1, not 4: pass --frame-skip 1")
     summary = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert (summary["args"]["frame_skip"], summary["args"]["hide_velocities"]) == (1, False)
 
@@ -202,10 +222,10 @@ def test_late_fusion_default_is_unchanged():
 
 def test_hidden_velocities_touch_only_the_policys_view(tmp_path, monkeypatch):
     """The demo file and the expert keep the velocities: --hide-velocities hides them from the policy only."""
-    monkeypatch.chdir(tmp_path)
-    demos = bc_oh.load_or_generate_demos(cache_args(hide_velocities=True), bc_oh.make_env("Hopper-v4"))
+    monkeypatch.chdir(link_experts(tmp_path))
+    demos, _ = load_demos(bc_oh, num_demo_samples=120, hide_velocities=True)
     assert (demos["observations"][:, HOPPER_VELOCITIES] != 0).mean() > 0.9
-    with np.load(tmp_path / "demos" / "Hopper-v4_120.npz") as saved:
+    with np.load(make_demos("Hopper-v4", 120)) as saved:
         assert np.array_equal(saved["observations"], demos["observations"])
 
 
@@ -214,10 +234,11 @@ def test_a_method_file_runs_on_v5_envs_with_the_shipped_experts(tmp_path, env):
     """v5: demos from the shipped (re-targeted) expert, noise on the velocities that observation_structure names
     (Ant-v5: 13-26 of 105), a tiny training run that ends with the summary line."""
     link_experts(tmp_path)
+    assert meta_of(make_demos(env, 200))["source"] == f"experts/{env}.pt"  # linked as tmp_path/demos/{env}_200.npz
     result = run_script("c2f.py", "--env", env, "--seeds", 1, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
                         "--num-demo-samples", 200, "--output-dir", tmp_path / "out", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip().splitlines()[-1].startswith(f"{env} c2f: ")
+    assert result.stdout.strip().splitlines()[-1].startswith(f"{env} c2f: ") and "% of the expert's " in result.stdout
     with np.load(tmp_path / "demos" / f"{env}_200.npz") as demos:
         assert demos["observations"].shape[1] == gym.make(env).observation_space.shape[0]
     assert bc_oh.velocity_dims(gym.make(env), env) == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
@@ -230,4 +251,4 @@ def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(t
     np.savez(path, observations=rng.normal(size=(200, 11)), actions=rng.uniform(-1, 1, (200, 3)).astype(np.float32),
              episode_starts=np.arange(200) % 50 == 0)
     assert_usage_error(run_script("bc_oh.py", "--demos", path, "--frame-skip", 1, "--epochs", 1, cwd=tmp_path),
-                       "was recorded at frame skip 4, this run is at 1: pass --frame-skip 4")
+                       "user.npz was made at frame skip 4, not 1: pass --frame-skip 4")
