@@ -267,9 +267,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = (
-        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}), (N, {act_dim})"
-    )
+    need = f"(N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs {need}"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

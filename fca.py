@@ -108,6 +108,11 @@ def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out_dim))
 
 
+def encoder_block(in_dim: int, out_dim: int, bias: bool = True) -> list:
+    """One hidden layer of the authors' encoder G: Linear -> BatchNorm1d -> LeakyReLU(0.2)."""
+    return [nn.Linear(in_dim, out_dim, bias=bias), nn.BatchNorm1d(out_dim), nn.LeakyReLU(0.2)]
+
+
 def authors_init(module: nn.Module):
     """The authors' weights_init: Xavier-uniform Linear weights, zero biases, BatchNorm scales from N(1, 0.02^2)."""
     if isinstance(module, nn.Linear):
@@ -128,18 +133,9 @@ class Policy(nn.Module):
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, embedding_dim: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.encoder = nn.Sequential(
-            nn.Linear(obs_dim * history, hidden, bias=False),
-            nn.BatchNorm1d(hidden),
-            nn.LeakyReLU(0.2),
-            nn.Linear(hidden, hidden),
-            nn.BatchNorm1d(hidden),
-            nn.LeakyReLU(0.2),
-            nn.Linear(hidden, hidden),
-            nn.BatchNorm1d(hidden),
-            nn.LeakyReLU(0.2),
-            nn.Linear(hidden, embedding_dim),
-        )
+        blocks = encoder_block(obs_dim * history, hidden, bias=False)  # the first Linear without bias, as theirs
+        blocks += encoder_block(hidden, hidden) + encoder_block(hidden, hidden)
+        self.encoder = nn.Sequential(*blocks, nn.Linear(hidden, embedding_dim))
         self.head = head(embedding_dim, act_dim, hidden)
         self.adversary = head(embedding_dim + act_dim, act_dim, hidden)  # conditioned on the true a_t
         self.apply(authors_init)
@@ -186,10 +182,8 @@ def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous,
 
 def authors_setting(env_id: str, weight: Optional[float], lr_ratio: Optional[float]) -> tuple:
     """(w, D's lr / G's lr): the flags, or the authors' values (their Hopper command: w = 2, D at 4e-4 against 2e-4)."""
-    hopper = env_id.startswith("Hopper")
-    return (2.0 if hopper else 1.0) if weight is None else weight, (
-        2.0 if hopper else 1.0
-    ) if lr_ratio is None else lr_ratio
+    default = 2.0 if env_id.startswith("Hopper") else 1.0  # the same for w and for the ratio
+    return default if weight is None else weight, default if lr_ratio is None else lr_ratio
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:
@@ -546,9 +540,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    shapes = (
-        f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs (N, {obs_dim}), (N, {act_dim})"
-    )
+    need = f"(N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs {need}"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")

@@ -381,7 +381,7 @@ def test_make_demos_keeps_a_file_of_the_same_expert_and_remakes_one_of_another(d
     (["--num-demo-samples", 0], "--num-demo-samples must be more than 1, got 0"),
     (["--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
     (["--env", "Walker2d-v4", "--checkpoint", SHIPPED_EXPERT], "is an expert for Hopper-v4, not Walker2d-v4"),
-], ids=["one-sample", "negative-samples", "missing-checkpoint", "other-env-checkpoint"])
+], ids=["one-sample", "negative-samples", "zero-samples", "missing-checkpoint", "other-env-checkpoint"])
 def test_make_demos_refuses_bad_input_in_one_line(args, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = run_in_process("expert_ppo.py", "--make-demos", *args)

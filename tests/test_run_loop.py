@@ -104,7 +104,7 @@ def test_a_demo_file_that_does_not_fit_is_told_what_is_wrong(tmp_path, case, mes
 def test_missing_demos_name_the_command_that_makes_them(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert_usage_error(run_in_process("bc_oh.py", "--frame-skip", 1, "--num-demo-samples", 500),
-                       "demo file demos/Hopper-v4_fs1_500.npz not found: run python expert_ppo.py --env Hopper-v4 --make-demos "
+                       f"demo file demos/Hopper-v4_fs1_500.npz not found in {tmp_path}: run python expert_ppo.py --env Hopper-v4 --make-demos "
                        "--frame-skip 1 --num-demo-samples 500")
     assert_usage_error(run_in_process("bc_oh.py", "--env", "Walker2d-v5"),
-                       "demos/Walker2d-v5_10000.npz not found: run python expert_ppo.py --env Walker2d-v5 --make-demos")
+                       f"demos/Walker2d-v5_10000.npz not found in {tmp_path}: run python expert_ppo.py --env Walker2d-v5 --make-demos")

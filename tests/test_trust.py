@@ -59,7 +59,7 @@ def test_actions_out_of_bounds_name_their_rows(tmp_path, monkeypatch):
     demos["actions"][7, 2], demos["actions"][150, 0] = 1.25, -1.5  # just outside [-1, 1], below and above
     save_demos(tmp_path / "one.npz", demos)
     result = run_in_process("bc_oh.py", "--demos", "one.npz", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "one.npz: actions of rows [7, 150] lie outside the env's bounds: clip")
+    assert_usage_error(result, "one.npz: actions of rows [7, 150] lie outside the bounds [-1, 1]: rescale or clip them")
 
 
 def test_a_users_unreadable_file_gets_no_advice_to_delete_or_unpickle_it(tmp_path, monkeypatch):
@@ -93,7 +93,7 @@ def test_num_demo_samples_with_demos_is_printed(tmp_path, monkeypatch, capsys):
     save_demos(tmp_path / "d.npz", fake_demos(300))
     monkeypatch.chdir(tmp_path)
     load_demos(bc_oh, demos="d.npz", num_demo_samples=120)
-    assert capsys.readouterr().out.startswith("demos: 120 steps from d.npz; copy error ")
+    assert capsys.readouterr().out.startswith("demos: 120 steps from d.npz (the first 120 of its 300); copy error ")
 
 
 def test_a_file_without_meta_still_loads(tmp_path, monkeypatch):
