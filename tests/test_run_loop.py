@@ -34,10 +34,12 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
     """Ctrl-C (SIGINT to the terminal's whole process group) or `kill PID` (SIGTERM to the main process only): one line
     on stderr, no traceback, and no process of the job left (the pool's workers and multiprocessing's helpers)."""
     link_experts(tmp_path)
-    command = [sys.executable, str(REPO_ROOT / "bc_oh.py"), "--seeds", "1", "2", "3", "--workers", "2", "--epochs", "1000",
+    command = [sys.executable, str(REPO_ROOT / "bc_oh.py"), "--seeds", "1", "2", "3", "--workers", "2", "--epochs", "20000",
                "--num-demo-samples", "300", "--eval-every", "1000", "--output-dir", str(tmp_path / "out")]
+    # as a terminal starts a job: Ctrl-C not ignored (a shell's background job, e.g. CI's, inherits SIGINT ignored)
     job = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                           env=dict(os.environ, PYTHONWARNINGS="ignore", PYTHONUNBUFFERED="1"))
+                           env=dict(os.environ, PYTHONWARNINGS="ignore", PYTHONUNBUFFERED="1"),
+                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     started = []
     for line in job.stdout:  # wait until both workers train
         started += [line] if line.startswith("seed ") and "| epoch " in line else []
