@@ -79,7 +79,9 @@ def plot(new: dict, old: dict, path: Path):
         axis.axhline(DIVERGED_ABOVE, color="black", linewidth=0.8, linestyle="--")
         axis.set(title=env, xlabel="epoch", yscale="log")
     axes[0][0].set_ylabel("adversary error (epoch mean)")
-    axes[0][-1].legend(fontsize=6)
+    labelled = [axis for axis in axes[0] if axis.get_legend_handles_labels()[1]]
+    if labelled:  # the seeds' legend once, where there are lines
+        labelled[-1].legend(fontsize=6)
     save_figure(figure, path)
 
 
