@@ -149,16 +149,10 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(
-        demos["observations"],
-        velocity_dims(env, args.env, args.velocity_dims),
-        args.obs_noise_std,
-        args.hide_velocities,
-        seed,
-    )
-    inputs = torch.as_tensor(
-        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
-    )
+    dims = velocity_dims(env, args.env, args.velocity_dims)
+    noisy = partially_observe(demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed)
+    history = stack_history(noisy, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)

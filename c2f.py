@@ -157,16 +157,10 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(
-        demos["observations"],
-        velocity_dims(env, args.env, args.velocity_dims),
-        args.obs_noise_std,
-        args.hide_velocities,
-        seed,
-    )
-    inputs = torch.as_tensor(
-        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
-    )
+    dims = velocity_dims(env, args.env, args.velocity_dims)
+    noisy = partially_observe(demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed)
+    history = stack_history(noisy, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     if args.two_stage:  # Table 3's two-stage training: first the coarse model alone, then frozen
@@ -186,13 +180,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         return loss
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return {
-        "evaluations": evaluations,
-        "policy": policy,
-        "obs_dim": obs_dim,
-        "act_dim": act_dim,
-        "ms_per_step": ms_per_step,
-    }
+    return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
 
 
 def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device):
@@ -215,14 +203,8 @@ def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torc
 
 # ---- Table 3's ablations, and the capacity controls: each flag changes only what it names ----
 
-PAPER_FLAGS = dict(
-    fusion="late",
-    coarse_output="action",
-    coarse_input="current",
-    policy_input="history",
-    stop_gradient=True,
-    coarse_action=True,
-)
+PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history")
+PAPER_FLAGS.update(stop_gradient=True, coarse_action=True)
 """the model flags of Args at the paper's values (--two-stage changes the training, not the model)"""
 
 
@@ -247,12 +229,8 @@ class Table3Policy(nn.Module):
     ):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = (
-            obs_dim,
-            fusion,
-            coarse_output,
-            stop_gradient,
-        )
+        self.obs_dim, self.fusion, self.coarse_output = obs_dim, fusion, coarse_output
+        self.stop_gradient = stop_gradient
         self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
@@ -264,9 +242,8 @@ class Table3Policy(nn.Module):
         elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
-            self.policy_rest = nn.Sequential(
-                nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
-            )
+            layers = [nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+            self.policy_rest = nn.Sequential(*layers)
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
 

@@ -411,12 +411,8 @@ class C2FPolicy(nn.Module):
     ):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output, self.stop_gradient = (
-            obs_dim,
-            fusion,
-            coarse_output,
-            stop_gradient,
-        )
+        self.obs_dim, self.fusion, self.coarse_output = obs_dim, fusion, coarse_output
+        self.stop_gradient = stop_gradient
         self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
         self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
         fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
@@ -428,9 +424,8 @@ class C2FPolicy(nn.Module):
         elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
-            self.policy_rest = nn.Sequential(
-                nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
-            )
+            layers = [nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+            self.policy_rest = nn.Sequential(*layers)
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
 

@@ -166,30 +166,20 @@ def collect_round(
     state record the noisy history the learner saw (inputs), the clean observation and the expert's action
     on it (labels), and whether the expert acted. Episodes cut by the budget end early."""
     env = make_env(args.env, args.frame_skip)
-    noise = PartialObservation(
-        env,
-        velocity_dims(env, args.env, args.velocity_dims),
-        args.obs_noise_std,
-        args.hide_velocities,
-        int(rng.integers(2**31)),
-    )
+    dims = velocity_dims(env, args.env, args.velocity_dims)
+    noise = PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, int(rng.integers(2**31)))
     low, high = env.action_space.low, env.action_space.high
     clean, _ = env.reset(seed=int(rng.integers(2**31)))  # the raw env: noise.observation adds the noise by hand
     frames, new_episode = None, True
     record = {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
     for _ in range(num_labels):
-        observed = noise.observation(clean)[
-            None
-        ]  # the last H frames, an episode's first one repeated (stack_history's rule)
+        observed = noise.observation(clean)[None]  # the last H frames, an episode's first repeated (as stack_history)
         frames = np.repeat(observed, args.history, axis=0) if new_episode else np.concatenate([frames[1:], observed])
         history = frames.reshape(1, -1)
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         expert_acts = rng.random() < beta
-        action = (
-            label
-            if expert_acts
-            else policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy().clip(low, high)
-        )
+        learner = policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy()
+        action = label if expert_acts else learner.clip(low, high)
         for key, value in zip(record, (history[0].astype(np.float32), clean, label, expert_acts)):
             record[key].append(value)
         clean, _, terminated, truncated, _ = env.step(action)
@@ -207,21 +197,13 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(
-        demos["observations"],
-        velocity_dims(env, args.env, args.velocity_dims),
-        args.obs_noise_std,
-        args.hide_velocities,
-        seed,
-    )
-    inputs = torch.as_tensor(
-        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
-    )
+    dims = velocity_dims(env, args.env, args.velocity_dims)
+    noisy = partially_observe(demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed)
+    history = stack_history(noisy, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)  # the normaliser keeps the demos' statistics
-    optimizer = torch.optim.Adam(
-        policy.parameters(), lr=args.learning_rate
-    )  # one optimiser, its moments kept over rounds
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)  # one, its moments kept over rounds
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()  # inputs, targets: the aggregate of the rounds so far
@@ -230,21 +212,11 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         optimizer.step()
         return loss
 
-    expert, rollout_rng, rounds, collected, evaluations = (
-        load_expert(args.expert.format(env=args.env), args.env),
-        np.random.default_rng(seed),
-        [],
-        [],
-        [],
-    )
+    expert, rollout_rng = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed)
+    rounds, collected, evaluations = [], [], []
     generator = torch.Generator(device=device).manual_seed(seed)  # one minibatch stream through all rounds
-    progress = {
-        "epoch": 0,
-        "epochs": args.epochs + args.dagger_rounds * args.dagger_epochs,
-        "start": time.time(),
-        "train_time": 0.0,
-        "steps": 0,
-    }
+    epochs = args.epochs + args.dagger_rounds * args.dagger_epochs
+    progress = dict(epoch=0, epochs=epochs, start=time.time(), train_time=0.0, steps=0)
     for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
         if round_number > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
             beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
@@ -254,15 +226,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             collected.append(data)
             inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
             targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
-            rounds.append(
-                {
-                    "round": round_number,
-                    "beta": beta,
-                    "labels": num_labels,
-                    "expert_fraction": float(data["expert_acted"].mean()),
-                    "aggregate": len(inputs),
-                }
-            )
+            expert_fraction = float(data["expert_acted"].mean())
+            rounds.append(dict(round=round_number, beta=beta, labels=num_labels, expert_fraction=expert_fraction))
+            rounds[-1]["aggregate"] = len(inputs)
         fit(
             args,
             policy,
@@ -279,16 +245,9 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
         if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
-    return {
-        "evaluations": evaluations,
-        "policy": policy,
-        "obs_dim": obs_dim,
-        "act_dim": act_dim,
-        "bc_oh_score": bc_oh_score,
-        "rounds": rounds,
-        "dagger_data": dagger_data,
-        "ms_per_step": 1000 * progress["train_time"] / progress["steps"],
-    }
+    ms_per_step = 1000 * progress["train_time"] / progress["steps"]
+    result = dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
+    return {**result, "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data}
 
 
 # (fit is this file's own: it trains one round, numbering epochs on from the rounds before (evaluation seeds, the log),

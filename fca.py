@@ -191,16 +191,10 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    noisy = partially_observe(
-        demos["observations"],
-        velocity_dims(env, args.env, args.velocity_dims),
-        args.obs_noise_std,
-        args.hide_velocities,
-        seed,
-    )
-    inputs = torch.as_tensor(
-        stack_history(noisy, demos["episode_starts"], args.history), dtype=torch.float32, device=device
-    )
+    dims = velocity_dims(env, args.env, args.velocity_dims)
+    noisy = partially_observe(demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed)
+    history = stack_history(noisy, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     previous = torch.as_tensor(
         previous_actions(demos["actions"], demos["episode_starts"]), dtype=torch.float32, device=device
@@ -231,13 +225,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     evaluations, ms_per_step = fit(
         args, policy, optimizer, adversary_optimizer, lr_ratio, train_step, len(inputs), seed, device
     )
-    return {
-        "evaluations": evaluations,
-        "policy": policy,
-        "obs_dim": obs_dim,
-        "act_dim": act_dim,
-        "ms_per_step": ms_per_step,
-    }
+    return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
 
 
 # (fit is this file's own: it decays the adversary's learning rate too, and logs the adversary's mean error)

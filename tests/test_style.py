@@ -14,11 +14,11 @@ CEILINGS = {
     "bc_oh": 473,
     "bc_so": 499,
     "history_dropout": 509,
-    "c2f": 654,
-    "fca": 610,
-    "keyframe": 621,
-    "average_ensemble": 572,
-    "dagger": 719,
+    "c2f": 631,
+    "fca": 598,
+    "keyframe": 609,
+    "average_ensemble": 566,
+    "dagger": 678,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
