@@ -159,23 +159,16 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         losses = {name: ((member(inputs[idx]) - targets[idx]) ** 2).mean() for name, member in policy.members.items()}
-        loss = sum(
-            losses.values()
-        )  # of both members; disjoint parameters, per-parameter Adam: each trains exactly as if alone
+        # the loss of both members: disjoint parameters and a per-parameter Adam, so each trains exactly as if alone
+        loss = sum(losses.values())
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return losses
 
     evaluations, member_evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return {
-        "evaluations": evaluations,
-        "member_evaluations": member_evaluations,
-        "policy": policy,
-        "obs_dim": obs_dim,
-        "act_dim": act_dim,
-        "ms_per_step": ms_per_step,
-    }
+    result = dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
+    return {**result, "member_evaluations": member_evaluations}
 
 
 # (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
@@ -193,20 +186,14 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
                 group["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
             losses = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
-        loss_text = ", ".join(
-            f"{name} {value.item():.5f}" for name, value in losses.items()
-        )  # .item() waits for the GPU
+        loss_text = ", ".join(f"{name} {value.item():.5f}" for name, value in losses.items())  # waits for the GPU
         train_time += time.time() - epoch_start
         if epoch % args.eval_every == 0 or epoch == args.epochs:
             policy.eval()
-            for name, member in {
-                "ensemble": policy,
-                **policy.members,
-            }.items():  # the members on the ensemble's episodes
+            for name, member in {"ensemble": policy, **policy.members}.items():  # the members on the same episodes
                 returns = evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)
-                (evaluations if name == "ensemble" else member_evaluations[name]).append(
-                    (epoch, float(np.mean(returns)))
-                )
+                evaluated = evaluations if name == "ensemble" else member_evaluations[name]
+                evaluated.append((epoch, float(np.mean(returns))))
             policy.train()
         if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
@@ -270,7 +257,8 @@ def run(args):
     if len(to_train) > args.workers:
         waiting = ", ".join(map(str, to_train[args.workers :]))
         print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # its seeds: the ETA's
+    pending = replace(args, seeds=to_train)  # the seeds to train in the order they start: job_eta counts them
+    jobs = [(pending, demos, seed, output_dir) for seed in to_train]
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
@@ -279,20 +267,18 @@ def run(args):
             with multiprocessing.get_context("spawn").Pool(args.workers, signal.signal, ignore_ctrl_c) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
-        done = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
-        lost = ", ".join(str(s) for s in to_train if s not in done) or "none"
-        done = ", ".join(map(str, kept + done)) or "none"
-        sys.exit(f"interrupted: seeds {done} finished and kept, {lost} lost: the same command trains only those")
+        finished = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
+        lost = ", ".join(str(s) for s in to_train if s not in finished) or "none"
+        kept_now = ", ".join(map(str, kept + finished)) or "none"
+        sys.exit(f"interrupted: seeds {kept_now} finished and kept, {lost} lost: the same command trains only those")
     per_seed.update(zip(to_train, entries))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
     member_scores = member_summary(per_seed)
     write_result(result_path, args, output_dir, per_seed, members=member_scores)
     print(f"\n{'seed':>6} | {'ensemble':>8}" + "".join(f" | {member:>8}" for member in member_scores))
     for seed, entry in per_seed.items():
-        print(
-            f"{seed:>6} | {entry['score']:8.1f}"
-            + "".join(f" | {entry['members'][m]['score']:8.1f}" for m in member_scores)
-        )
+        members = "".join(f" | {entry['members'][m]['score']:8.1f}" for m in member_scores)
+        print(f"{seed:>6} | {entry['score']:8.1f}{members}")
     print(
         "members: "
         + ", ".join(f"{m} {values['mean']:.1f} ± {values['std']:.1f}" for m, values in member_scores.items())

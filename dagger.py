@@ -357,7 +357,8 @@ def run(args):
     if len(to_train) > args.workers:
         waiting = ", ".join(map(str, to_train[args.workers :]))
         print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # its seeds: the ETA's
+    pending = replace(args, seeds=to_train)  # the seeds to train in the order they start: job_eta counts them
+    jobs = [(pending, demos, seed, output_dir) for seed in to_train]
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
@@ -366,10 +367,10 @@ def run(args):
             with multiprocessing.get_context("spawn").Pool(args.workers, signal.signal, ignore_ctrl_c) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
-        done = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
-        lost = ", ".join(str(s) for s in to_train if s not in done) or "none"
-        done = ", ".join(map(str, kept + done)) or "none"
-        sys.exit(f"interrupted: seeds {done} finished and kept, {lost} lost: the same command trains only those")
+        finished = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
+        lost = ", ".join(str(s) for s in to_train if s not in finished) or "none"
+        kept_now = ", ".join(map(str, kept + finished)) or "none"
+        sys.exit(f"interrupted: seeds {kept_now} finished and kept, {lost} lost: the same command trains only those")
     per_seed.update(zip(to_train, entries))
     result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
     write_result(result_path, args, output_dir, per_seed)
@@ -394,7 +395,8 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
         os.replace(f"{path}.tmp", path)  # written, then renamed: an interrupted run leaves no half checkpoint
-    write_result(os.path.join(output_dir, f"result_seeds{seed}.json"), args, output_dir, {seed: entry})  # a rerun keeps
+    path = os.path.join(output_dir, f"result_seeds{seed}.json")
+    write_result(path, args, output_dir, {seed: entry})  # now: a rerun keeps this seed
     return entry
 
 

@@ -94,13 +94,7 @@ class Args:
             raise UsageError(
                 f"--keyframe-fraction must lie in (0, 1], got {self.keyframe_fraction}: the share weighted up"
             )
-        for name in (
-            "keyframe_k",
-            "keyframe_spacing",
-            "keyframe_weight",
-            "keyframe_temperature",
-            "keyframe_model_epochs",
-        ):
+        for name in "keyframe_k keyframe_spacing keyframe_weight keyframe_temperature keyframe_model_epochs".split():
             if not getattr(self, name) > 0:
                 raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
 
@@ -161,9 +155,8 @@ def action_prediction_errors(
     squared error ||prediction - a_t||^2 on every sample, APE_t. Seeded by the caller's torch.manual_seed."""
     inputs = torch.as_tensor(previous_actions(actions, episode_starts, k, spacing), dtype=torch.float32, device=device)
     targets = torch.as_tensor(actions, dtype=torch.float32, device=device)
-    model = nn.Sequential(nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])).to(
-        device
-    )
+    layers = [nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])]
+    model = nn.Sequential(*layers).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     for _ in range(epochs * max(1, len(inputs) // batch_size)):
         idx = torch.randint(len(inputs), (batch_size,), device=device)
@@ -210,20 +203,13 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
+    k, spacing, model_epochs = args.keyframe_k, args.keyframe_spacing, args.keyframe_model_epochs
     ape = action_prediction_errors(
-        demos["actions"],
-        demos["episode_starts"],
-        args.keyframe_k,
-        args.keyframe_spacing,
-        args.keyframe_model_epochs,
-        args.batch_size,
-        device,
+        demos["actions"], demos["episode_starts"], k, spacing, model_epochs, args.batch_size, device
     )
     weights = keyframe_weights(ape, args.keyframe_fraction, args.keyframe_weight)
-    is_key, at_change = (
-        keyframes(ape, args.keyframe_fraction).cpu().numpy(),
-        changepoints(demos["actions"], demos["episode_starts"]),
-    )
+    is_key = keyframes(ape, args.keyframe_fraction).cpu().numpy()
+    at_change = changepoints(demos["actions"], demos["episode_starts"])
     print(
         f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
         f"{(is_key & at_change).sum()} of them at action changepoints "
@@ -234,10 +220,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)  # per sample, then weighted
-        loss = (
-            (weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature))
-            * error
-        ).mean()
+        weight = weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)
+        loss = (weight * error).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
