@@ -1,10 +1,7 @@
 # Behavioural cloning from the single current observation, BC-SO (paper section 5.1 and Table 2); see README.md
 """BC-SO: an MLP maps the current noisy observation o_t alone to the expert action a_t.
 
-Without a history it cannot see past the noise on the velocities, but it cannot infer and copy the
-previous action either: it is free of the copycat shortcut, and it is the coarse model of c2f.py.
-The data pipeline is the one every method shares (stacked histories); the policy reads only the last
-frame of the stack, so --history does not change the result.
+It sees neither through the velocity noise nor a_{t-1} to copy: c2f.py's coarse model (--history changes nothing).
 
     python bc_so.py --env Hopper-v4
 """
@@ -33,39 +30,39 @@ class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: Optional[int] = None
-    """simulator steps per action; None: the env's own (time limit and rewards rescaled: docs/methods.md)"""
+    """simulator steps per action; None: the env's own (docs/methods.md)"""
     seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
-    """training seeds; the score is mean ± std over them, and a rerun keeps the seeds already finished"""
+    """training seeds, scored as mean ± std; a rerun keeps the finished ones"""
     workers: Optional[int] = None
-    """seeds trained at the same time, one process each; None: one per core (1 with --cuda)"""
+    """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
     demos: Optional[str] = None
-    """demonstrations (.npz, README); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
+    """demonstrations (.npz); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
     num_demo_samples: Optional[int] = None
-    """demonstration steps; None: the paper's 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
+    """demonstration steps; None: 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
     obs_noise_std: float = 0.2
-    """std of the Gaussian noise on the velocity entries of every observation (partial observability)"""
+    """std of the Gaussian noise on the velocity entries of each observation"""
     hide_velocities: bool = False
-    """zero the velocity entries instead of adding noise (the positions-only setting)"""
+    """zero the velocity entries instead (positions only)"""
     velocity_dims: Optional[List[int]] = None
     """indices of the velocity entries, for envs not in the built-in table"""
     history: int = 2
-    """frames in the observation history [o_{t-H+1}, ..., o_t]"""
+    """frames in the observation history"""
     epochs: int = 1000
-    """epochs of num-samples / batch-size minibatches, each drawn at random with replacement"""
+    """epochs of num-samples / batch-size minibatches drawn with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: Optional[float] = None
-    """Adam learning rate, decayed linearly to zero; None: the paper's, 1e-5 for Hopper and 1e-4 otherwise"""
+    """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 256
-    """width of the hidden layers of every three-layer MLP"""
+    """width of the hidden layers"""
     eval_every: int = 100
-    """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
+    """evaluate every this many epochs and after the last; the score is the mean of the last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation (deterministic policy, partially observed env)"""
+    """episodes per evaluation"""
     output_dir: str = "runs/{run_name}/{env}"
-    """where results and models go; {run_name}: the method, then each flag changed from its default"""
+    """results and models; {run_name}: the method, then each flag changed from its default"""
     save_model: bool = False
-    """write a self-contained checkpoint per seed (weights, normalisation, args)"""
+    """save each seed's policy (weights, normalisation, args)"""
     cuda: bool = False
     """train on the GPU"""
 
@@ -74,14 +71,13 @@ class Args:
 # The method: one MLP on the current frame o_t, trained by MSE
 
 
-# Copied from bc_oh.mlp
+# Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP."""
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
 
-# Copied from bc_oh.Normalizer
 class Normalizer(nn.Module):
     """Standardises inputs with statistics of the training demos, stored with the model."""
 
@@ -99,20 +95,18 @@ class Policy(nn.Module):
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
-        self.obs_dim = obs_dim
         self.normalize = Normalizer(inputs[:, -obs_dim:])
         self.net = mlp(obs_dim, act_dim, hidden)
 
     def forward(self, obs_history):
-        return self.net(self.normalize(obs_history[:, -self.obs_dim :]))
+        return self.net(self.normalize(obs_history[:, -self.net[0].in_features :]))  # in_features = obs_dim
 
 
-# Copied from bc_oh.make_policy
+# Copied from bc_oh.make_policy..stack_history
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
     return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
 
 
-# Copied from bc_oh.train_seed
 def train_seed(args, demos: dict, seed: int, device) -> dict:
     """Train one seed; returns its evaluations [(epoch, mean return)] and the trained policy."""
     torch.manual_seed(seed)
@@ -137,9 +131,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
 
 
-# Copied from bc_oh.fit
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True) -> tuple:
-    """Run train_step(minibatch indices) for --epochs, the learning rate decayed linearly to zero; evaluate every
+    """train_step(minibatch indices) for --epochs, the learning rate decayed linearly to 0, evaluating every
     --eval-every epochs and after the last. Returns ([(epoch, mean return)], ms per training step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
@@ -147,22 +140,23 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            for group in optimizer.param_groups:
-                group["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
+            for group in optimizer.param_groups:  # each from its own initial rate, linearly to 0
+                group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - step / total_steps)
             loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
         train_time += time.time() - epoch_start
-        if evaluate_policy and (epoch % args.eval_every == 0 or epoch == args.epochs):
+        evaluating = epoch % args.eval_every == 0 or epoch == args.epochs
+        if evaluate_policy and evaluating:
             policy.eval()
             returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
             evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if epoch % args.eval_every == 0 or epoch == args.epochs or epoch % max(1, args.epochs // 20) == 0:
+        if evaluating or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            speed, eta = f"{1000 * train_time / step:.2f} ms/step", job_eta(args, seed, start, epoch / args.epochs)
             line = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last}"
-            print(f"{line} | {speed} | {eta}", flush=True)
+            eta = job_eta(args, seed, start, epoch / args.epochs)
+            print(f"{line} | {1000 * train_time / step:.2f} ms/step | {eta}", flush=True)
     return evaluations, 1000 * train_time / step
 
 
@@ -170,7 +164,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # Evaluation
 
 
-# Copied from bc_oh.evaluate
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
@@ -186,7 +179,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
         inputs = torch.as_tensor(frames.reshape(episodes, -1), dtype=torch.float32, device=device)
         obs, reward, terminated, truncated, _ = envs.step(policy(inputs).cpu().numpy().clip(low, high))
         returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays exactly one episode: what follows its end does not count
+        running &= ~(terminated | truncated)  # each env plays one episode: what follows its end does not count
         frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
     env.close()
     envs.close()
@@ -194,13 +187,12 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ==============================================================================================
-# Shared plumbing, identical in every method file (each "# Copied from" block is checked by
-# scripts/check_copies.py): the seed loop, the partially observed env, demos, history
+# Shared plumbing, identical in every method file (checked by scripts/check_copies.py): the seed loop, the
+# partially observed env, demos, history
 
 
-# Copied from bc_oh.run
 def run(args):
-    """Check the input, load the demos, train every seed not yet finished (each written when it ends), report."""
+    """Check the input, load the demos, train each seed not yet finished (each written when it ends), report."""
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed
     env = make_env(args.env)
@@ -208,10 +200,10 @@ def run(args):
     args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded with the results
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     args.learning_rate = args.learning_rate or (1e-5 if args.env.startswith("Hopper") else 1e-4)
-    torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
+    torch.set_num_threads(1)  # small networks gain nothing from more threads, and runs can share a machine
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
-    per_seed = {seed: finished_seed(os.path.join(output_dir, f"result_seeds{seed}.json"), args) for seed in args.seeds}
+    per_seed = {seed: finished_seed(output_dir, seed, args) for seed in args.seeds}
     kept, to_train = [s for s in args.seeds if per_seed[s]], [s for s in args.seeds if not per_seed[s]]
     if kept:
         print(f"seeds {', '.join(map(str, kept))}: kept their finished results in {output_dir} (delete to retrain)")
@@ -220,30 +212,27 @@ def run(args):
     if len(to_train) > args.workers:
         waiting = ", ".join(map(str, to_train[args.workers :]))
         print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    pending = replace(args, seeds=to_train)  # the seeds to train in the order they start: job_eta counts them
-    jobs = [(pending, demos, seed, output_dir) for seed in to_train]
+    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # job_eta counts to_train
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
         else:  # spawn, not fork: torch and MuJoCo are not fork-safe; the workers ignore Ctrl-C, this process acts
-            ignore_ctrl_c = (signal.SIGINT, signal.SIG_IGN)
-            with multiprocessing.get_context("spawn").Pool(args.workers, signal.signal, ignore_ctrl_c) as pool:
+            spawn = multiprocessing.get_context("spawn")
+            with spawn.Pool(args.workers, signal.signal, (signal.SIGINT, signal.SIG_IGN)) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
-        finished = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
-        lost = ", ".join(str(s) for s in to_train if s not in finished) or "none"
-        kept_now = ", ".join(map(str, kept + finished)) or "none"
-        sys.exit(f"interrupted: seeds {kept_now} finished and kept, {lost} lost: the same command trains only those")
+        lost = [s for s in to_train if not finished_seed(output_dir, s, args)]
+        done, lost = [s for s in args.seeds if s not in lost] or ["none"], lost or ["none"]
+        where = f"seeds {', '.join(map(str, done))} finished and kept, {', '.join(map(str, lost))} lost"
+        sys.exit(f"interrupted: {where}: the same command trains only those")
     per_seed.update(zip(to_train, entries))
-    result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    write_result(result_path, args, output_dir, per_seed)
+    result_path = write_result(output_dir, args, per_seed)
     print(f"\n{'seed':>6} | {'score':>8}\n" + "\n".join(f"{s:>6} | {per_seed[s]['score']:8.1f}" for s in per_seed))
     print(f"result: {result_path}\n{summary_line(args, [entry['score'] for entry in per_seed.values()], meta)}")
 
 
-# Copied from bc_oh.train_and_record
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    """Train one seed, write its model (with --save-model) and its result_seeds<seed>.json; returns its entry."""
+    """Train one seed, save its model (with --save-model) and its result_seeds<seed>.json; returns its entry."""
     torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
@@ -255,13 +244,11 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         path = os.path.join(output_dir, f"seed{seed}.pt")
         os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
-        os.replace(f"{path}.tmp", path)  # written, then renamed: an interrupted run leaves no half checkpoint
-    path = os.path.join(output_dir, f"result_seeds{seed}.json")
-    write_result(path, args, output_dir, {seed: entry})  # now: a rerun keeps this seed
+        os.replace(f"{path}.tmp", path)  # an interrupted run leaves no half-written checkpoint
+    write_result(output_dir, args, {seed: entry})  # now: a rerun keeps this seed
     return entry
 
 
-# Copied from bc_oh.job_eta
 def job_eta(args, seed: int, start: float, done: float) -> str:
     """The whole job's time left, seen from one seed: its own rest, then the waves of seeds still to start after it."""
     workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0
@@ -269,55 +256,51 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
     return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
 
 
-# Copied from bc_oh.run_name
 def run_name(args) -> str:
-    """{run_name} in --output-dir: METHOD, then every flag given a value other than its default (e.g.
-    c2f__fusion-early), so runs of other settings never mix. Flags that change no result are left out."""
+    """METHOD, then each flag given a value other than its default (e.g. c2f__fusion-early), so that runs of other
+    settings never mix; flags that change no result are left out."""
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
         if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
             continue
-        flag = name.replace("_", "-")
-        text = "-".join(map(str, value)) if isinstance(value, list) else os.path.basename(str(value))
-        text = text.removesuffix(".npz")
+        flag, text = name.replace("_", "-"), "-".join(map(str, value)) if isinstance(value, list) else str(value)
+        text = os.path.basename(text).removesuffix(".npz")
         changed.append(flag if value is True else f"no-{flag}" if value is False else f"{flag}-{text}")
     return "__".join([METHOD, *changed])
 
 
-# Copied from bc_oh.finished_seed
-def finished_seed(path: str, args) -> Optional[dict]:
-    """The entry of the one seed in the result at path, if an earlier run wrote it with these same settings (and
-    with --save-model, its model): a rerun of an interrupted command trains only the seeds it had not finished."""
+def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
+    """The seed's entry, if an earlier run recorded it with these settings (and with --save-model, saved its model)."""
     ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")
     try:
-        with open(path) as file:
+        with open(os.path.join(output_dir, f"result_seeds{seed}.json")) as file:
             result = json.load(file)
         (entry,) = result["scores"].values()
         recorded = {name: value for name, value in result["args"].items() if name not in ignored}
     except Exception:  # none yet, half written, or not one of ours: train the seed
         return None
     same = recorded == {name: value for name, value in asdict(args).items() if name not in ignored}
-    model = os.path.join(os.path.dirname(path), f"seed{result['args']['seeds'][0]}.pt")
+    model = os.path.join(output_dir, f"seed{seed}.pt")
     return entry if same and (os.path.isfile(model) or not args.save_model) else None
 
 
-# Copied from bc_oh.write_result
-def write_result(path: str, args, output_dir: str, per_seed: dict, **more):
-    """Write the JSON result of the seeds in per_seed, with their mean and std (a reader refuses a half-written one)."""
+def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
+    """Write result_seeds<seeds>.json: the seeds in per_seed, their mean and std. Returns its path."""
     scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
     result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
     result.update(std=float(np.std(scores)), **more)
+    path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
     os.makedirs(output_dir, exist_ok=True)
-    with open(path, "w") as file:
+    with open(path, "w") as file:  # written plainly: a reader refuses a half-written file
         json.dump(result, file, indent=1)
+    return path
 
 
-# Copied from bc_oh.summary_line
 def summary_line(args, scores: list, meta: dict) -> str:
     """Mean ± std over the seeds, and its share of the expert's return that expert_ppo.py recorded in the demos."""
-    seeds = f"{len(scores)} seed{'s' * (len(scores) > 1)}"
-    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {seeds}"
+    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed"
+    line += "s" * (len(scores) > 1)
     if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
         return line
     share = round(np.mean(scores) / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
@@ -325,25 +308,21 @@ def summary_line(args, scores: list, meta: dict) -> str:
     return f"{line}, {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
 
 
-# Copied from bc_oh.UsageError
 class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-# Copied from bc_oh.require
 def require(condition, message: str):
     """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
     if not condition:
         raise UsageError(message)
 
 
-# Copied from bc_oh.check_common_args
 def check_common_args(args):
-    """Reject bad values of the arguments every method shares, before anything slow happens."""
-    for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip".split():
+    """Refuse bad values of the flags every method shares, before anything slow happens."""
+    for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
         value, flag = getattr(args, name, None), f"--{name.replace('_', '-')}"
         require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
-    require(args.workers is None or args.workers > 0, f"--workers must be positive, got {args.workers}")
     require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
     seeds = " ".join(map(str, args.seeds)) or "none"
     require(len(set(args.seeds)) == len(args.seeds) > 0, f"--seeds needs distinct seeds, got {seeds}: e.g. 1 2 3")
@@ -352,27 +331,21 @@ def check_common_args(args):
     require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
 
 
-# Copied from bc_oh.velocity_dims
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     """Indices of the joint velocities in the observation, where the paper adds its noise."""
-    obs_dim = env.observation_space.shape[0]
+    obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        if min(override) < 0 or max(override) >= obs_dim:
-            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
         return sorted(set(override))
-    structure = getattr(env.unwrapped, "observation_structure", None)
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # the v4 envs' _get_obs
-    if env_id.split("-")[0] not in known:
-        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    require(env_id.split("-")[0] in known, f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
     return list(range(*known[env_id.split("-")[0]]))
 
 
-# Copied from bc_oh.PartialObservation
 class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
-    with hide, those entries zeroed (positions only)."""
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or those zeroed."""
 
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
@@ -384,28 +357,23 @@ class PartialObservation(gym.ObservationWrapper):
         return obs
 
 
-# Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
-    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
-    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
+    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
+    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
-    native = getattr(env.unwrapped, "frame_skip", None)
+    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
+    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
     if frame_skip is None or frame_skip == native:
         return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
     env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
 
 
-# Copied from bc_oh.load_demos
 def load_demos(args, env: gym.Env) -> tuple:
     """(demos, meta): the arrays of --demos, or of the file `expert_ppo.py --make-demos` wrote, checked against env."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -431,42 +399,39 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    need = f"(N, {obs_dim}) and (N, {act_dim})"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs {need}"
+    need = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {need}"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
-    held = f"{path} holds {len(obs)} steps"
-    require(len(obs) >= (args.num_demo_samples or 0), f"{held}: pass --num-demo-samples {len(obs)} or fewer")
     take = args.num_demo_samples or len(obs)  # with --demos: the first N steps, or all
+    require(len(obs) >= take, f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer")
+    batch = "not more than a batch: use more, or a smaller --batch-size"
+    require(take > args.batch_size, f"{path} holds {take} steps, {batch}")
     first = f" (the first {take} of its {len(obs)})" * (take < len(obs))
     obs, actions, starts = obs[:take].astype(np.float64), actions[:take].astype(np.float32), starts[:take].astype(bool)
-    require(len(obs) > args.batch_size, f"{held}, not more than a batch: use more, or a smaller --batch-size")
     for key, values in (("observations", obs), ("actions", actions)):
         bad = np.unique(np.argwhere(~np.isfinite(values))[:, 0])  # each row once
         require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3].tolist()}: fix or drop them")
     low, high = env.action_space.low, env.action_space.high
     outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
-    bounds = f"outside the bounds [{low.min():g}, {high.max():g}]"
-    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} lie {bounds}: rescale or clip them")
+    bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
+    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
     shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
     print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
-# Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
-    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
+    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
-# Copied from bc_oh.partially_observe
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
-    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    """The demos as the policy's sensor saw them: velocity noise drawn once per sample, or those entries zeroed."""
     observed = observations.copy()
     if hide:
         observed[:, dims] = 0.0
@@ -475,7 +440,6 @@ def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bo
     return observed
 
 
-# Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
     """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
     index = np.arange(len(observations))
@@ -485,8 +449,8 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
-# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+# MuJoCo 3.x warns of a deprecated attribute in gymnasium's HalfCheetah XML (and appends to ./MUJOCO_LOG.TXT) each
+# time that env is made: drop that warning, print the others.
 mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 

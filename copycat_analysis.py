@@ -92,24 +92,20 @@ class UsageError(Exception):
 # Copied from bc_oh.velocity_dims
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     """Indices of the joint velocities in the observation, where the paper adds its noise."""
-    obs_dim = env.observation_space.shape[0]
+    obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        if min(override) < 0 or max(override) >= obs_dim:
-            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
         return sorted(set(override))
-    structure = getattr(env.unwrapped, "observation_structure", None)
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # the v4 envs' _get_obs
-    if env_id.split("-")[0] not in known:
-        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    require(env_id.split("-")[0] in known, f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
     return list(range(*known[env_id.split("-")[0]]))
 
 
 # Copied from bc_oh.PartialObservation
 class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
-    with hide, those entries zeroed (positions only)."""
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or those zeroed."""
 
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
@@ -123,20 +119,17 @@ class PartialObservation(gym.ObservationWrapper):
 
 # Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
-    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
-    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
+    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
+    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
-    native = getattr(env.unwrapped, "frame_skip", None)
+    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
+    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
     if frame_skip is None or frame_skip == native:
         return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
     env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
@@ -153,18 +146,21 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(
-            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
-        )
+        layers = [
+            nn.Linear(obs_dim, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, act_dim),
+        ]
+        self.net = nn.Sequential(*layers)
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[
-            ..., : len(self.obs_mean)
-        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[..., : len(self.obs_mean)]  # an expert re-targeted to a wider observation (Ant-v5's) reads its start
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -172,19 +168,14 @@ class ExpertPolicy(nn.Module):
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
-    if not os.path.isfile(path):
-        raise UsageError(
-            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
-        )
+    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
-        )
-    if trained_on != env_id:
-        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy or re-train it")
+    require(trained_on == env_id, f"{path} is an expert for {trained_on}, not {env_id}: pass the one made for {env_id}")
     return policy.eval()
 
 
@@ -267,24 +258,24 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    need = f"(N, {obs_dim}) and (N, {act_dim})"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs {need}"
+    need = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {need}"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
-    held = f"{path} holds {len(obs)} steps"
-    require(len(obs) >= (args.num_demo_samples or 0), f"{held}: pass --num-demo-samples {len(obs)} or fewer")
     take = args.num_demo_samples or len(obs)  # with --demos: the first N steps, or all
+    require(len(obs) >= take, f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer")
+    batch = "not more than a batch: use more, or a smaller --batch-size"
+    require(take > args.batch_size, f"{path} holds {take} steps, {batch}")
     first = f" (the first {take} of its {len(obs)})" * (take < len(obs))
     obs, actions, starts = obs[:take].astype(np.float64), actions[:take].astype(np.float32), starts[:take].astype(bool)
-    require(len(obs) > args.batch_size, f"{held}, not more than a batch: use more, or a smaller --batch-size")
     for key, values in (("observations", obs), ("actions", actions)):
         bad = np.unique(np.argwhere(~np.isfinite(values))[:, 0])  # each row once
         require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3].tolist()}: fix or drop them")
     low, high = env.action_space.low, env.action_space.high
     outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
-    bounds = f"outside the bounds [{low.min():g}, {high.max():g}]"
-    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} lie {bounds}: rescale or clip them")
+    bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
+    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
     shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
     print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
@@ -293,8 +284,8 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 # Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
-    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
+    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
@@ -319,8 +310,7 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
 
 # Copied from bc_oh.partially_observe
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
-    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    """The demos as the policy's sensor saw them: velocity noise drawn once per sample, or those entries zeroed."""
     observed = observations.copy()
     if hide:
         observed[:, dims] = 0.0
@@ -368,12 +358,11 @@ class SOPolicy(nn.Module):
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
-        self.obs_dim = obs_dim
         self.normalize = Normalizer(inputs[:, -obs_dim:])
         self.net = mlp(obs_dim, act_dim, hidden)
 
     def forward(self, obs_history):
-        return self.net(self.normalize(obs_history[:, -self.obs_dim :]))
+        return self.net(self.normalize(obs_history[:, -self.net[0].in_features :]))  # in_features = obs_dim
 
 
 # Copied from bc_oh.Policy with Policy->OHPolicy
@@ -391,59 +380,44 @@ class OHPolicy(nn.Module):
 
 # Copied from c2f.Table3Policy with Table3Policy->C2FPolicy
 class C2FPolicy(nn.Module):
-    """Policy with every Table 3 choice open. At PAPER_FLAGS it builds the same layers in the same order (so the
-    same seed gives the same initial weights) and computes the same outputs. penultimate = BC-OH's own two-hidden-
-    layer MLP with sg(zeta) joined before its last layer; coarse_action=False feeds zeros instead of sg(zeta)."""
+    """Policy with the Table 3 flags of args open. At PAPER_FLAGS it builds the same layers in the same order (the
+    same seed gives the same weights) and outputs. penultimate: BC-OH's two-hidden-layer MLP with sg(zeta) joined
+    before its last layer; --no-coarse-action feeds zeros instead of sg(zeta)."""
 
-    def __init__(
-        self,
-        obs_dim: int,
-        act_dim: int,
-        history: int,
-        hidden: int,
-        inputs: torch.Tensor,
-        fusion="late",
-        coarse_output="action",
-        coarse_input="current",
-        policy_input="history",
-        stop_gradient=True,
-        coarse_action=True,
-    ):
+    def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
-        self.normalize = Normalizer(inputs)
-        self.obs_dim, self.fusion, self.coarse_output = obs_dim, fusion, coarse_output
-        self.stop_gradient = stop_gradient
-        self.coarse_input, self.policy_input, self.coarse_action = coarse_input, policy_input, coarse_action
-        self.coarse = mlp(obs_dim * (history if coarse_input == "history" else 1), act_dim, hidden)
-        fed = hidden if coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        extra = {stage: fed if fusion == stage else 0 for stage in ("early", "middle", "late", "penultimate", "output")}
-        policy_in = obs_dim * (history if policy_input == "history" else 1) + extra["early"]
+        self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args
+        hidden, fusion = args.hidden, args.fusion
+        self.coarse = mlp(obs_dim * (args.history if args.coarse_input == "history" else 1), act_dim, hidden)
+        fed = hidden if args.coarse_output == "feature" else act_dim  # width of what the coarse model passes on
+        early, middle = fed * (fusion == "early"), fed * (fusion == "middle")
+        policy_in = obs_dim * (args.history if args.policy_input == "history" else 1) + early
         self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
         if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
         elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
-            layers = [nn.Linear(hidden + extra["middle"], hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+            layers = [nn.Linear(hidden + middle, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
             self.policy_rest = nn.Sequential(*layers)
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
-        self.head = nn.Linear(width + extra["late"] + extra["penultimate"] + extra["output"], act_dim)
+        self.head = nn.Linear(width + fed * (fusion in ("late", "penultimate", "output")), act_dim)
 
     def pick(self, x, which: str):
         """The normalised history itself, or its last frame o_t."""
         return x if which == "history" else x[:, -self.obs_dim :]
 
     def coarse_model(self, obs_history):
-        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.coarse_input))
+        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.args.coarse_input))
         return self.coarse[-1](feature), feature
 
     def coarse_and_final(self, obs_history):
-        zeta, feature = self.coarse_model(obs_history)
-        fed = feature if self.coarse_output == "feature" else zeta
-        fed = fed.detach() if self.stop_gradient else fed
-        fed = fed if self.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if self.fusion == stage else h  # noqa: E731
-        h = self.policy_first(join(self.pick(self.normalize(obs_history), self.policy_input), "early"))
+        args, (zeta, feature) = self.args, self.coarse_model(obs_history)
+        fed = feature if args.coarse_output == "feature" else zeta
+        fed = fed.detach() if args.stop_gradient else fed
+        fed = fed if args.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
+        join = lambda h, stage: torch.cat([h, fed], dim=1) if args.fusion == stage else h  # noqa: E731
+        h = self.policy_first(join(self.pick(self.normalize(obs_history), args.policy_input), "early"))
         h = self.policy_rest(join(h, "middle"))
         return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))
 
@@ -478,8 +452,7 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, 
     elif method == "bc_oh":
         policy = OHPolicy(obs_dim, act_dim, history, hidden, inputs)
     else:
-        policy = C2FPolicy(obs_dim, act_dim, history, hidden, inputs, saved["fusion"], saved["coarse_output"],
-                           saved["coarse_input"], saved["policy_input"], saved["stop_gradient"], saved.get("coarse_action", True))
+        policy = C2FPolicy(obs_dim, act_dim, inputs, SimpleNamespace(**{"coarse_action": True, **saved}))
     try:
         policy.load_state_dict(checkpoint["state_dict"])
     except RuntimeError:

@@ -1,13 +1,8 @@
 # DAgger with the expert online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README.md
 """DAgger: BC-OH on the demos, then rounds of on-policy data labelled by the expert (Ross et al. 2011).
 
-Round 0 trains BC-OH on the demos exactly as bc_oh.py does. Each of the --dagger-rounds rounds then
-rolls out a beta-mix of expert and learner in the noisy env (at every step the expert's action is
-executed with probability beta, else the learner's), records at every visited state the noisy history
-the learner saw and the expert's action computed from the CLEAN observation (the noise is applied by
-hand, so the clean one stays visible), adds these labels to the data and trains the same learner on
-for --dagger-epochs epochs over everything collected so far. This is the only script that queries the
-expert online; the extra labels over all rounds are --dagger-samples (the paper's DAgger 8K).
+Round 0 is bc_oh.py. Each round then rolls out a beta-mix of expert and learner, labels every visited state with the
+expert's action on the clean observation, aggregates, and trains the learner on (--dagger-samples labels in all).
 
     python dagger.py --env Hopper-v4
 """
@@ -36,41 +31,41 @@ class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: Optional[int] = None
-    """simulator steps per action; None: the env's own (time limit and rewards rescaled: docs/methods.md)"""
+    """simulator steps per action; None: the env's own (docs/methods.md)"""
     seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
-    """training seeds; the score is mean ± std over them, and a rerun keeps the seeds already finished"""
+    """training seeds, scored as mean ± std; a rerun keeps the finished ones"""
     workers: Optional[int] = None
-    """seeds trained at the same time, one process each; None: one per core (1 with --cuda)"""
+    """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
     demos: Optional[str] = None
-    """demonstrations (.npz, README); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
+    """demonstrations (.npz); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that labels every DAgger round's states (queried online)"""
     num_demo_samples: Optional[int] = None
-    """demonstration steps; None: the paper's 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
+    """demonstration steps; None: 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
     obs_noise_std: float = 0.2
-    """std of the Gaussian noise on the velocity entries of every observation (partial observability)"""
+    """std of the Gaussian noise on the velocity entries of each observation"""
     hide_velocities: bool = False
-    """zero the velocity entries instead of adding noise (the positions-only setting)"""
+    """zero the velocity entries instead (positions only)"""
     velocity_dims: Optional[List[int]] = None
     """indices of the velocity entries, for envs not in the built-in table"""
     history: int = 2
-    """frames in the observation history [o_{t-H+1}, ..., o_t]"""
+    """frames in the observation history"""
     epochs: int = 1000
-    """epochs of num-samples / batch-size minibatches, each drawn at random with replacement"""
+    """epochs of num-samples / batch-size minibatches drawn with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: Optional[float] = None
-    """Adam learning rate, decayed linearly to zero; None: the paper's, 1e-5 for Hopper and 1e-4 otherwise"""
+    """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 256
-    """width of the hidden layers of every three-layer MLP"""
+    """width of the hidden layers"""
     eval_every: int = 100
-    """evaluate every this many epochs (and after the last); a seed's score is the mean of its last 3"""
+    """evaluate every this many epochs and after the last; the score is the mean of the last 3"""
     eval_episodes: int = 10
-    """episodes per evaluation (deterministic policy, partially observed env)"""
+    """episodes per evaluation"""
     output_dir: str = "runs/{run_name}/{env}"
-    """where results and models go; {run_name}: the method, then each flag changed from its default"""
+    """results and models; {run_name}: the method, then each flag changed from its default"""
     save_model: bool = False
-    """write a self-contained checkpoint per seed (weights, normalisation, args)"""
+    """save each seed's policy (weights, normalisation, args)"""
     cuda: bool = False
     """train on the GPU"""
     dagger_samples: int = 8000
@@ -78,11 +73,9 @@ class Args:
     dagger_rounds: int = 4
     """rounds of rolling out, labelling, aggregating and training on"""
     dagger_epochs: int = 100
-    """epochs per round over the aggregated data, continuing the learner (the learning rate restarts at
-    --learning-rate and decays linearly to zero within each round)"""
+    """epochs per round over the aggregated data, the learning rate restarting each round"""
     dagger_beta_rounds: Optional[int] = None
-    """round r executes the expert with probability beta = max(0, 1 - r / this), as imitation's
-    LinearBetaSchedule with the demos as its round 0; default --dagger-rounds: the last round is all learner"""
+    """round r executes the expert with probability beta = max(0, 1 - r / this); None: --dagger-rounds"""
 
 
 # ==============================================================================================
@@ -90,34 +83,26 @@ class Args:
 
 
 def check_dagger_args(args):
-    """Reject bad DAgger settings, and a missing or wrong expert (queried online), before training."""
-    for name in ("dagger_rounds", "dagger_epochs"):
-        if getattr(args, name) <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    if args.dagger_beta_rounds is not None and args.dagger_beta_rounds <= 0:
-        raise UsageError(f"--dagger-beta-rounds must be positive, got {args.dagger_beta_rounds}")
-    if args.dagger_samples < args.dagger_rounds:
-        raise UsageError(
-            f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds "
-            f"{args.dagger_rounds}: raise --dagger-samples or lower --dagger-rounds"
-        )
-    expert_path = args.expert.format(env=args.env)
-    if not os.path.isfile(expert_path):
-        raise UsageError(
-            f"no expert for {args.env} at {expert_path}: DAgger labels states with the expert online; "
-            "pass --expert with a checkpoint from expert_ppo.py"
-        )
-    load_expert(expert_path, args.env)  # fails now, not after round 0, if it is not an expert for this env
+    """Refuse bad DAgger settings, and a missing or wrong expert (queried online), before training."""
+    for name in ("dagger_rounds", "dagger_epochs", "dagger_beta_rounds"):
+        value = getattr(args, name)
+        require(value is None or value > 0, f"--{name.replace('_', '-')} must be positive, got {value}")
+    samples, rounds = args.dagger_samples, args.dagger_rounds
+    few = f"--dagger-samples {samples} is below one label per round of --dagger-rounds {rounds}"
+    require(samples >= rounds, f"{few}: raise --dagger-samples or lower --dagger-rounds")
+    path = args.expert.format(env=args.env)
+    online = f"no expert for {args.env} at {path}: DAgger labels states with the expert online"
+    require(os.path.isfile(path), f"{online}; pass --expert with a checkpoint from expert_ppo.py")
+    load_expert(path, args.env)  # fails now, not after round 0, if it is not an expert for this env
 
 
-# Copied from bc_oh.mlp
+# Copied from bc_oh.mlp..make_policy
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP."""
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
 
-# Copied from bc_oh.Normalizer
 class Normalizer(nn.Module):
     """Standardises inputs with statistics of the training demos, stored with the model."""
 
@@ -130,7 +115,6 @@ class Normalizer(nn.Module):
         return (x - self.mean) / self.std
 
 
-# Copied from bc_oh.Policy
 class Policy(nn.Module):
     """BC-OH: the whole history, flattened, into one MLP."""
 
@@ -143,7 +127,6 @@ class Policy(nn.Module):
         return self.net(self.normalize(obs_history))
 
 
-# Copied from bc_oh.make_policy
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
     return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
 
@@ -159,12 +142,10 @@ def dagger_beta(round_number: int, beta_rounds: int) -> float:
 
 
 @torch.no_grad()
-def collect_round(
-    policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng: np.random.Generator, device
-) -> dict:
-    """Roll out the beta-mix of expert and learner in the partially observed env for num_labels steps; at every visited
-    state record the noisy history the learner saw (inputs), the clean observation and the expert's action
-    on it (labels), and whether the expert acted. Episodes cut by the budget end early."""
+def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng, device) -> dict:
+    """num_labels steps of the beta-mix (the expert acts with probability beta) in the partially observed env,
+    recording the history the learner saw (inputs), the clean observation, the expert's action on it (labels) and
+    whether the expert acted. The noise is added by hand, so the clean observation stays visible."""
     env = make_env(args.env, args.frame_skip)
     dims = velocity_dims(env, args.env, args.velocity_dims)
     noise = PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, int(rng.integers(2**31)))
@@ -191,9 +172,9 @@ def collect_round(
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:
-    """Train one seed: round 0 is BC-OH on the demos (as bc_oh.py), then every DAgger round rolls out,
-    labels, aggregates and trains on. Returns the evaluations [(epoch, mean return)], the trained policy,
-    the score of the round-0 learner, a log of the rounds and the labelled DAgger data of all rounds."""
+    """Train one seed: BC-OH, then the DAgger rounds, one optimizer and minibatch stream through all of them. Returns
+    the evaluations [(epoch, mean return)], the policy, round 0's score, the rounds' log and their labelled data. The
+    normaliser keeps the demos' statistics."""
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -202,23 +183,22 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
-    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)  # the normaliser keeps the demos' statistics
-    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)  # one, its moments kept over rounds
+    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
-        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()  # inputs, targets: the aggregate of the rounds so far
+        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return loss
 
     expert, rollout_rng = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed)
-    rounds, collected, evaluations = [], [], []
-    generator = torch.Generator(device=device).manual_seed(seed)  # one minibatch stream through all rounds
-    epochs = args.epochs + args.dagger_rounds * args.dagger_epochs
-    progress = dict(epoch=0, epochs=epochs, start=time.time(), train_time=0.0, steps=0)
+    rounds, collected, generator = [], [], torch.Generator(device=device).manual_seed(seed)
+    epochs, evaluations = args.epochs + args.dagger_rounds * args.dagger_epochs, []
+    progress = dict(epoch=0, epochs=epochs, start=time.time(), train_time=0.0, steps=0, evaluations=evaluations)
     for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
-        if round_number > 0:  # roll out the beta-mix with the current learner, label with the expert, aggregate
+        if round_number > 0:  # roll out the beta-mix, label with the expert, aggregate (train_step sees the aggregate)
             beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
             policy.eval()
             data = collect_round(policy, expert, args, num_labels, beta, rollout_rng, device)
@@ -229,19 +209,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             expert_fraction = float(data["expert_acted"].mean())
             rounds.append(dict(round=round_number, beta=beta, labels=num_labels, expert_fraction=expert_fraction))
             rounds[-1]["aggregate"] = len(inputs)
-        fit(
-            args,
-            policy,
-            optimizer,
-            train_step,
-            len(inputs),
-            seed,
-            device,
-            round_number,
-            generator,
-            progress,
-            evaluations,
-        )
+        progress.update(round=round_number, generator=generator)
+        fit(args, policy, optimizer, train_step, len(inputs), seed, device, progress)
         if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
@@ -250,23 +219,12 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     return {**result, "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data}
 
 
-# (fit is this file's own: it trains one round, numbering epochs on from the rounds before (evaluation seeds, the log),
-# draws minibatches from the one generator of all rounds, and evaluates the final learner three times)
-def fit(
-    args,
-    policy,
-    optimizer,
-    train_step,
-    num_samples: int,
-    seed: int,
-    device,
-    round_number: int,
-    generator,
-    progress,
-    evaluations,
-):
-    """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to zero; evaluate
-    every --eval-every epochs and after the round's last, appending (epoch, mean return) to evaluations."""
+# (fit is this file's own: one round, its epochs numbered on from the rounds before (evaluation seeds, the log), its
+# minibatches from the one generator of all rounds; the final learner is evaluated three times)
+def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, progress: dict):
+    """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to 0, evaluating
+    every --eval-every epochs and after the round's last into progress["evaluations"]."""
+    round_number, evaluations, generator = progress["round"], progress["evaluations"], progress["generator"]
     epochs = args.dagger_epochs if round_number else args.epochs
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
@@ -274,24 +232,19 @@ def fit(
         progress["epoch"] += 1
         epoch, epoch_start = progress["epoch"], time.time()
         for _ in range(steps_per_epoch):
-            for group in optimizer.param_groups:
-                group["lr"] = args.learning_rate * (1 - step / total_steps)  # linear decay
+            for group in optimizer.param_groups:  # each from its own initial rate, linearly to 0
+                group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - step / total_steps)
             loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
-        progress["train_time"], progress["steps"] = (
-            progress["train_time"] + time.time() - epoch_start,
-            progress["steps"] + steps_per_epoch,
-        )
+        progress["train_time"] += time.time() - epoch_start
+        progress["steps"] += steps_per_epoch
         if epoch % args.eval_every == 0 or round_epoch == epochs:
             policy.eval()
-            final = (
-                round_number == args.dagger_rounds and round_epoch == epochs
-            )  # the final learner: 3 disjoint evaluations
-            for k in range(3 if final else 1):
-                returns = evaluate(
-                    policy, args, args.eval_episodes, 10_000 * seed + epoch + k * args.eval_episodes, device
-                )
+            final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations
+            for k in range(3 if final else 1):  # on disjoint episodes
+                episodes_seed = 10_000 * seed + epoch + k * args.eval_episodes
+                returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
                 evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
         if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, progress["epochs"] // 20) == 0:
@@ -299,8 +252,7 @@ def fit(
             speed = f"{1000 * progress['train_time'] / progress['steps']:.2f} ms/step"
             eta = job_eta(args, seed, progress["start"], epoch / progress["epochs"])
             line = f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f}"
-            line += f" | last eval {last}"
-            print(f"{line} | {speed} | {eta}", flush=True)
+            print(f"{line} | last eval {last} | {speed} | {eta}", flush=True)
 
 
 # ==============================================================================================
@@ -323,7 +275,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
         inputs = torch.as_tensor(frames.reshape(episodes, -1), dtype=torch.float32, device=device)
         obs, reward, terminated, truncated, _ = envs.step(policy(inputs).cpu().numpy().clip(low, high))
         returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays exactly one episode: what follows its end does not count
+        running &= ~(terminated | truncated)  # each env plays one episode: what follows its end does not count
         frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
     env.close()
     envs.close()
@@ -331,12 +283,12 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ==============================================================================================
-# Shared plumbing, identical in every method file (each "# Copied from" block is checked by
-# scripts/check_copies.py): the seed loop, the partially observed env, demos, history
+# Shared plumbing, identical in every method file (checked by scripts/check_copies.py): the seed loop, the
+# partially observed env, demos, history
 
 
 def run(args):
-    """Check the input, load the demos, train every seed not yet finished (each written when it ends), report."""
+    """Check the input, load the demos, train each seed not yet finished (each written when it ends), report."""
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed
     env = make_env(args.env)
@@ -345,10 +297,10 @@ def run(args):
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     check_dagger_args(args)
     args.learning_rate = args.learning_rate or (1e-5 if args.env.startswith("Hopper") else 1e-4)
-    torch.set_num_threads(1)  # these small networks gain nothing from more threads, and runs can share a machine
+    torch.set_num_threads(1)  # small networks gain nothing from more threads, and runs can share a machine
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
-    per_seed = {seed: finished_seed(os.path.join(output_dir, f"result_seeds{seed}.json"), args) for seed in args.seeds}
+    per_seed = {seed: finished_seed(output_dir, seed, args) for seed in args.seeds}
     kept, to_train = [s for s in args.seeds if per_seed[s]], [s for s in args.seeds if not per_seed[s]]
     if kept:
         print(f"seeds {', '.join(map(str, kept))}: kept their finished results in {output_dir} (delete to retrain)")
@@ -357,23 +309,21 @@ def run(args):
     if len(to_train) > args.workers:
         waiting = ", ".join(map(str, to_train[args.workers :]))
         print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    pending = replace(args, seeds=to_train)  # the seeds to train in the order they start: job_eta counts them
-    jobs = [(pending, demos, seed, output_dir) for seed in to_train]
+    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # job_eta counts to_train
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
         else:  # spawn, not fork: torch and MuJoCo are not fork-safe; the workers ignore Ctrl-C, this process acts
-            ignore_ctrl_c = (signal.SIGINT, signal.SIG_IGN)
-            with multiprocessing.get_context("spawn").Pool(args.workers, signal.signal, ignore_ctrl_c) as pool:
+            spawn = multiprocessing.get_context("spawn")
+            with spawn.Pool(args.workers, signal.signal, (signal.SIGINT, signal.SIG_IGN)) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
-        finished = [s for s in to_train if finished_seed(os.path.join(output_dir, f"result_seeds{s}.json"), args)]
-        lost = ", ".join(str(s) for s in to_train if s not in finished) or "none"
-        kept_now = ", ".join(map(str, kept + finished)) or "none"
-        sys.exit(f"interrupted: seeds {kept_now} finished and kept, {lost} lost: the same command trains only those")
+        lost = [s for s in to_train if not finished_seed(output_dir, s, args)]
+        done, lost = [s for s in args.seeds if s not in lost] or ["none"], lost or ["none"]
+        where = f"seeds {', '.join(map(str, done))} finished and kept, {', '.join(map(str, lost))} lost"
+        sys.exit(f"interrupted: {where}: the same command trains only those")
     per_seed.update(zip(to_train, entries))
-    result_path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, args.seeds))}.json")
-    write_result(result_path, args, output_dir, per_seed)
+    result_path = write_result(output_dir, args, per_seed)
     print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}")
     for seed, entry in per_seed.items():
         print(f"{seed:>6} | {entry['score']:8.1f} | {entry['bc_oh_score']:15.1f}")
@@ -381,7 +331,7 @@ def run(args):
 
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    """Train one seed, write its model (with --save-model) and its result_seeds<seed>.json; returns its entry."""
+    """Train one seed, save its model (with --save-model) and its result_seeds<seed>.json; returns its entry."""
     torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
@@ -394,13 +344,12 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         path = os.path.join(output_dir, f"seed{seed}.pt")
         os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
-        os.replace(f"{path}.tmp", path)  # written, then renamed: an interrupted run leaves no half checkpoint
-    path = os.path.join(output_dir, f"result_seeds{seed}.json")
-    write_result(path, args, output_dir, {seed: entry})  # now: a rerun keeps this seed
+        os.replace(f"{path}.tmp", path)  # an interrupted run leaves no half-written checkpoint
+    write_result(output_dir, args, {seed: entry})  # now: a rerun keeps this seed
     return entry
 
 
-# Copied from bc_oh.job_eta
+# Copied from bc_oh.job_eta..make_env
 def job_eta(args, seed: int, start: float, done: float) -> str:
     """The whole job's time left, seen from one seed: its own rest, then the waves of seeds still to start after it."""
     workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0
@@ -408,55 +357,51 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
     return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
 
 
-# Copied from bc_oh.run_name
 def run_name(args) -> str:
-    """{run_name} in --output-dir: METHOD, then every flag given a value other than its default (e.g.
-    c2f__fusion-early), so runs of other settings never mix. Flags that change no result are left out."""
+    """METHOD, then each flag given a value other than its default (e.g. c2f__fusion-early), so that runs of other
+    settings never mix; flags that change no result are left out."""
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
         if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
             continue
-        flag = name.replace("_", "-")
-        text = "-".join(map(str, value)) if isinstance(value, list) else os.path.basename(str(value))
-        text = text.removesuffix(".npz")
+        flag, text = name.replace("_", "-"), "-".join(map(str, value)) if isinstance(value, list) else str(value)
+        text = os.path.basename(text).removesuffix(".npz")
         changed.append(flag if value is True else f"no-{flag}" if value is False else f"{flag}-{text}")
     return "__".join([METHOD, *changed])
 
 
-# Copied from bc_oh.finished_seed
-def finished_seed(path: str, args) -> Optional[dict]:
-    """The entry of the one seed in the result at path, if an earlier run wrote it with these same settings (and
-    with --save-model, its model): a rerun of an interrupted command trains only the seeds it had not finished."""
+def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
+    """The seed's entry, if an earlier run recorded it with these settings (and with --save-model, saved its model)."""
     ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")
     try:
-        with open(path) as file:
+        with open(os.path.join(output_dir, f"result_seeds{seed}.json")) as file:
             result = json.load(file)
         (entry,) = result["scores"].values()
         recorded = {name: value for name, value in result["args"].items() if name not in ignored}
     except Exception:  # none yet, half written, or not one of ours: train the seed
         return None
     same = recorded == {name: value for name, value in asdict(args).items() if name not in ignored}
-    model = os.path.join(os.path.dirname(path), f"seed{result['args']['seeds'][0]}.pt")
+    model = os.path.join(output_dir, f"seed{seed}.pt")
     return entry if same and (os.path.isfile(model) or not args.save_model) else None
 
 
-# Copied from bc_oh.write_result
-def write_result(path: str, args, output_dir: str, per_seed: dict, **more):
-    """Write the JSON result of the seeds in per_seed, with their mean and std (a reader refuses a half-written one)."""
+def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
+    """Write result_seeds<seeds>.json: the seeds in per_seed, their mean and std. Returns its path."""
     scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
     result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
     result.update(std=float(np.std(scores)), **more)
+    path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
     os.makedirs(output_dir, exist_ok=True)
-    with open(path, "w") as file:
+    with open(path, "w") as file:  # written plainly: a reader refuses a half-written file
         json.dump(result, file, indent=1)
+    return path
 
 
-# Copied from bc_oh.summary_line
 def summary_line(args, scores: list, meta: dict) -> str:
     """Mean ± std over the seeds, and its share of the expert's return that expert_ppo.py recorded in the demos."""
-    seeds = f"{len(scores)} seed{'s' * (len(scores) > 1)}"
-    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {seeds}"
+    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed"
+    line += "s" * (len(scores) > 1)
     if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
         return line
     share = round(np.mean(scores) / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
@@ -464,25 +409,21 @@ def summary_line(args, scores: list, meta: dict) -> str:
     return f"{line}, {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
 
 
-# Copied from bc_oh.UsageError
 class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-# Copied from bc_oh.require
 def require(condition, message: str):
     """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
     if not condition:
         raise UsageError(message)
 
 
-# Copied from bc_oh.check_common_args
 def check_common_args(args):
-    """Reject bad values of the arguments every method shares, before anything slow happens."""
-    for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip".split():
+    """Refuse bad values of the flags every method shares, before anything slow happens."""
+    for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
         value, flag = getattr(args, name, None), f"--{name.replace('_', '-')}"
         require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
-    require(args.workers is None or args.workers > 0, f"--workers must be positive, got {args.workers}")
     require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
     seeds = " ".join(map(str, args.seeds)) or "none"
     require(len(set(args.seeds)) == len(args.seeds) > 0, f"--seeds needs distinct seeds, got {seeds}: e.g. 1 2 3")
@@ -491,27 +432,21 @@ def check_common_args(args):
     require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
 
 
-# Copied from bc_oh.velocity_dims
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     """Indices of the joint velocities in the observation, where the paper adds its noise."""
-    obs_dim = env.observation_space.shape[0]
+    obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        if min(override) < 0 or max(override) >= obs_dim:
-            raise UsageError(f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
         return sorted(set(override))
-    structure = getattr(env.unwrapped, "observation_structure", None)
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # the v4 envs' _get_obs
-    if env_id.split("-")[0] not in known:
-        raise UsageError(f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
+    require(env_id.split("-")[0] in known, f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
     return list(range(*known[env_id.split("-")[0]]))
 
 
-# Copied from bc_oh.PartialObservation
 class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or
-    with hide, those entries zeroed (positions only)."""
+    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or those zeroed."""
 
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
@@ -523,22 +458,18 @@ class PartialObservation(gym.ObservationWrapper):
         return obs
 
 
-# Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
-    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
-    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
+    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
+    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
-    native = getattr(env.unwrapped, "frame_skip", None)
+    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
+    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
     if frame_skip is None or frame_skip == native:
         return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
     env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
@@ -551,18 +482,21 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(
-            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
-        )
+        layers = [
+            nn.Linear(obs_dim, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, act_dim),
+        ]
+        self.net = nn.Sequential(*layers)
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[
-            ..., : len(self.obs_mean)
-        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[..., : len(self.obs_mean)]  # an expert re-targeted to a wider observation (Ant-v5's) reads its start
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
@@ -570,23 +504,18 @@ class ExpertPolicy(nn.Module):
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
-    if not os.path.isfile(path):
-        raise UsageError(
-            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
-        )
+    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
-        )
-    if trained_on != env_id:
-        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy or re-train it")
+    require(trained_on == env_id, f"{path} is an expert for {trained_on}, not {env_id}: pass the one made for {env_id}")
     return policy.eval()
 
 
-# Copied from bc_oh.load_demos
+# Copied from bc_oh.load_demos..stack_history
 def load_demos(args, env: gym.Env) -> tuple:
     """(demos, meta): the arrays of --demos, or of the file `expert_ppo.py --make-demos` wrote, checked against env."""
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -612,42 +541,39 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
     turned = (obs_dim, act_dim) == (len(obs), len(actions))
     fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    need = f"(N, {obs_dim}) and (N, {act_dim})"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {args.env} needs {need}"
+    need = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+    shapes = f"observations {obs.shape} and actions {actions.shape}, but {need}"
     require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
     rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
     require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
-    held = f"{path} holds {len(obs)} steps"
-    require(len(obs) >= (args.num_demo_samples or 0), f"{held}: pass --num-demo-samples {len(obs)} or fewer")
     take = args.num_demo_samples or len(obs)  # with --demos: the first N steps, or all
+    require(len(obs) >= take, f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer")
+    batch = "not more than a batch: use more, or a smaller --batch-size"
+    require(take > args.batch_size, f"{path} holds {take} steps, {batch}")
     first = f" (the first {take} of its {len(obs)})" * (take < len(obs))
     obs, actions, starts = obs[:take].astype(np.float64), actions[:take].astype(np.float32), starts[:take].astype(bool)
-    require(len(obs) > args.batch_size, f"{held}, not more than a batch: use more, or a smaller --batch-size")
     for key, values in (("observations", obs), ("actions", actions)):
         bad = np.unique(np.argwhere(~np.isfinite(values))[:, 0])  # each row once
         require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3].tolist()}: fix or drop them")
     low, high = env.action_space.low, env.action_space.high
     outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
-    bounds = f"outside the bounds [{low.min():g}, {high.max():g}]"
-    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} lie {bounds}: rescale or clip them")
+    bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
+    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
     shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
     print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
-# Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous
-    action predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
+    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
 
-# Copied from bc_oh.partially_observe
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: noise on the velocity entries drawn once per sample
-    (a noisy sensor at collection time), or with hide, those entries zeroed."""
+    """The demos as the policy's sensor saw them: velocity noise drawn once per sample, or those entries zeroed."""
     observed = observations.copy()
     if hide:
         observed[:, dims] = 0.0
@@ -656,7 +582,6 @@ def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bo
     return observed
 
 
-# Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
     """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
     index = np.arange(len(observations))
@@ -666,8 +591,8 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
-# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
+# MuJoCo 3.x warns of a deprecated attribute in gymnasium's HalfCheetah XML (and appends to ./MUJOCO_LOG.TXT) each
+# time that env is made: drop that warning, print the others.
 mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 

@@ -110,22 +110,26 @@ class UsageError(Exception):
 # Env
 
 
+# Copied from bc_oh.require
+def require(condition, message: str):
+    """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
+    if not condition:
+        raise UsageError(message)
+
+
 # Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make with a clear error for unknown ids and non-continuous action spaces. A frame_skip other
-    than the env's own K0 stretches the time limit by K0 / frame_skip and scales every reward by
-    frame_skip / K0: an episode covers the same simulated time and returns keep their usual scale."""
+    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
+    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has {type(env.action_space).__name__} actions: imitation here needs Box ones")
-    native = getattr(env.unwrapped, "frame_skip", None)
+    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
+    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
     if frame_skip is None or frame_skip == native:
         return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
+    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
     env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
@@ -199,37 +203,35 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        self.net = nn.Sequential(
-            nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, act_dim)
-        )
+        layers = [
+            nn.Linear(obs_dim, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, act_dim),
+        ]
+        self.net = nn.Sequential(*layers)
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[
-            ..., : len(self.obs_mean)
-        ]  # re-targeted to a wider observation (Ant-v5's contact forces): its leading entries
+        obs = obs[..., : len(self.obs_mean)]  # an expert re-targeted to a wider observation (Ant-v5's) reads its start
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
 
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
-    if not os.path.isfile(path):
-        raise UsageError(
-            f"expert checkpoint {path} not found: train one (python expert_ppo.py --env {env_id}), or give its path"
-        )
+    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(
-            f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy it, or re-train it"
-        )
-    if trained_on != env_id:
-        raise UsageError(f"{path} is an expert for {trained_on}, not {env_id}: pass the checkpoint made for {env_id}")
+        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy or re-train it")
+    require(trained_on == env_id, f"{path} is an expert for {trained_on}, not {env_id}: pass the one made for {env_id}")
     return policy.eval()
 
 

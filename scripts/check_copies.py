@@ -5,9 +5,13 @@ top-level function or class carries a marker on the line directly above it (or a
 
     # Copied from bc_oh.make_env
     # Copied from bc_oh.make_env with Foo->Bar, foo->bar
+    # Copied from bc_oh.run..stack_history
 
 The copy must equal the top-level def/class `make_env` of bc_oh.py, after the renames (plain text
-replacements, applied in order to the original). A copy may itself be the original of another copy.
+replacements, applied in order to the original). A span (`first..last`) covers a run of consecutive
+definitions: the text from the marker's definition to the end of `last` must equal bc_oh.py's text from
+`run` to the end of `stack_history`, comments and blank lines between them included. A copy may itself be
+the original of another copy.
 
     python scripts/check_copies.py          # report drifted copies, exit 1 if any
     python scripts/check_copies.py --fix    # rewrite drifted copies from their originals
@@ -20,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 MARKER_PREFIX = "# Copied from"
-MARKER = re.compile(r"# Copied from (\w+)\.(\w+)(?: with (.+?))?\s*$")
+MARKER = re.compile(r"# Copied from (\w+)\.(\w+)(?:\.\.(\w+))?(?: with (.+?))?\s*$")
 DEFINITIONS = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)
 MAX_FIX_PASSES = 10
 
@@ -41,6 +45,8 @@ class Copy:
     orig_name: str
     renames: list  # [(old, new), ...]
     block: Block
+    last_name: str = ""  # a span's last definition in the original; "" for one definition
+    names: tuple = ()  # the definitions the copy covers (a span's as the copy names them: spans take no renames)
 
 
 def parse_renames(text):
@@ -77,7 +83,8 @@ def block_text(lines, block):
 
 def find_copies(file, source, problems):
     """The copies marked in one file; malformed or misplaced markers are added to problems."""
-    starts = {block.start: block for block in top_level_blocks(source).values()}
+    blocks = top_level_blocks(source)
+    starts = {block.start: block for block in blocks.values()}
     copies = []
     for number, line in enumerate(source.splitlines(), start=1):
         if not line.startswith(MARKER_PREFIX):
@@ -89,11 +96,23 @@ def find_copies(file, source, problems):
             problems.append(f"{file}:{number}: marker is not directly above a top-level def or class")
         else:
             try:
-                renames = parse_renames(match.group(3)) if match.group(3) else []
+                renames = parse_renames(match.group(4)) if match.group(4) else []
             except ValueError as error:
                 problems.append(f"{file}:{number}: {error}")
                 continue
-            copies.append(Copy(file, number, match.group(1), match.group(2), renames, starts[number + 1]))
+            block, last = starts[number + 1], match.group(3) or ""
+            if last:  # a span: from this definition to the end of the copy's `last`
+                end = blocks.get(apply_renames(last, renames))
+                if end is None or end.end < block.start:
+                    problems.append(f"{file}:{number}: span end {last} is not a definition below the marker")
+                    continue
+                block = Block(block.start, end.end)
+            names = tuple(name for name, b in blocks.items() if block.start <= b.start <= block.end) if last else ()
+            names = names or (match.group(2),)
+            copies.append(Copy(file, number, match.group(1), match.group(2), renames, block, last, names))
+    for span in (copy for copy in copies if copy.last_name):  # a marker inside a span would be fixed twice
+        for inner in (copy for copy in copies if span.block.start < copy.marker_line < span.block.end):
+            problems.append(f"{file}:{inner.marker_line}: marker inside the span of line {span.marker_line}")
     return copies
 
 
@@ -109,15 +128,17 @@ def check(root, fix=False):
             problems.append(f"{path.name}:{error.lineno}: cannot parse ({error.msg})")
     # Bottom-up, so a fix that changes a block's length leaves the line numbers above it valid.
     for copy in sorted(copies, key=lambda c: (c.file, -c.marker_line)):
-        where = f"{copy.file}:{copy.marker_line}"
+        where, name = f"{copy.file}:{copy.marker_line}", copy.orig_name + (f"..{copy.last_name}" if copy.last_name else "")
         orig_file = f"{copy.orig_module}.py"
         try:
-            orig_block = top_level_blocks(sources[orig_file]).get(copy.orig_name)
+            orig_blocks = top_level_blocks(sources[orig_file])
         except (KeyError, SyntaxError):
-            orig_block = None
-        if orig_block is None:
-            problems.append(f"{where}: original {copy.orig_module}.{copy.orig_name} not found")
+            orig_blocks = {}
+        orig_block, last = orig_blocks.get(copy.orig_name), orig_blocks.get(copy.last_name or copy.orig_name)
+        if orig_block is None or last is None or last.end < orig_block.start:
+            problems.append(f"{where}: original {copy.orig_module}.{name} not found")
             continue
+        orig_block = Block(orig_block.start, last.end)
         expected = apply_renames(block_text(sources[orig_file].splitlines(keepends=True), orig_block), copy.renames)
         lines = sources[copy.file].splitlines(keepends=True)
         if block_text(lines, copy.block) == expected:
@@ -128,9 +149,9 @@ def check(root, fix=False):
             sources[copy.file] = "".join(lines)
             (root / copy.file).write_text(sources[copy.file])
             rewritten += 1
-            print(f"{where}: rewrote copy of {copy.orig_module}.{copy.orig_name} from {orig_where}")
+            print(f"{where}: rewrote copy of {copy.orig_module}.{name} from {orig_where}")
         else:
-            problems.append(f"{where}: copy of {copy.orig_module}.{copy.orig_name} drifted from its original ({orig_where})")
+            problems.append(f"{where}: copy of {copy.orig_module}.{name} drifted from its original ({orig_where})")
     return problems, len(copies), rewritten
 
 

@@ -255,7 +255,7 @@ def test_the_paper_model_is_table3s_model_at_the_paper_flags():
     and gradients."""
     policy, (obs_history, target) = model(), batch()
     torch.manual_seed(0)
-    general = c2f.Table3Policy(OBS, ACT, H, HIDDEN, torch.randn(64, H * OBS) * 3 + 1, **DEFAULTS)
+    general = c2f.Table3Policy(OBS, ACT, torch.randn(64, H * OBS) * 3 + 1, argparse.Namespace(history=H, hidden=HIDDEN, **DEFAULTS))
     assert type(policy) is c2f.Policy and all(type(model(**{name: value})) is c2f.Table3Policy for name, value in
                                                 [("fusion", "output"), ("coarse_input", "history"), ("stop_gradient", False), ("coarse_action", False)])
     assert list(policy.state_dict()) == list(general.state_dict())

@@ -158,7 +158,7 @@ def shared_plumbing():
     source = (REPO_ROOT / "bc_oh.py").read_text()
     banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# Shared plumbing"))
     names = {name for name, block in top_level_blocks(source).items() if block.start > banner} | SHARED_BEFORE_THE_BANNER
-    copied_by_bc_oh = {copy.orig_name: copy.orig_module for copy in find_copies("bc_oh.py", source, [])}
+    copied_by_bc_oh = {name: copy.orig_module for copy in find_copies("bc_oh.py", source, []) for name in copy.names}
     return {name: copied_by_bc_oh.get(name, "bc_oh") for name in names}
 
 
@@ -178,7 +178,7 @@ def test_every_method_file_is_checked():
         if file == "bc_oh.py":
             continue
         source = (REPO_ROOT / file).read_text()
-        copied = {(copy.orig_module, copy.orig_name) for copy in find_copies(file, source, problems)}
+        copied = {(copy.orig_module, name) for copy in find_copies(file, source, problems) for name in copy.names}
         defined = top_level_blocks(source)
         for name, module in sorted(plumbing.items()):
             if (file, name) in OWN_VERSIONS:
@@ -195,9 +195,36 @@ def test_dagger_alone_queries_the_expert():
     method_files = sorted(path.name for path in REPO_ROOT.glob("*.py") if re.search(r'^METHOD = "\w+"', path.read_text(), re.M))
     for file in method_files:
         source = (REPO_ROOT / file).read_text()
-        copied = {(copy.orig_module, copy.orig_name) for copy in find_copies(file, source, [])}
+        copied = {(copy.orig_module, name) for copy in find_copies(file, source, []) for name in copy.names}
         defined = {"ExpertPolicy", "load_expert"} & set(top_level_blocks(source))
         if file == "dagger.py":
             assert {("expert_ppo", "ExpertPolicy"), ("expert_ppo", "load_expert")} <= copied
         else:
             assert not defined, f"{file} defines {sorted(defined)}"
+
+
+SPAN = ORIGINAL.replace("def helper", "# Copied from orig.helper..Foo\ndef helper")
+
+
+def test_a_span_covers_its_definitions_and_what_lies_between(tmp_path):
+    """`# Copied from orig.first..last` checks the whole run of definitions, the blank lines and comments between
+    them included, and --fix rewrites it from the original."""
+    write(tmp_path, "orig.py", ORIGINAL)
+    write(tmp_path, "span.py", SPAN)
+    problems, count, _ = check(tmp_path)
+    assert (problems, count) == ([], 1)
+    (copy,) = find_copies("span.py", (tmp_path / "span.py").read_text(), [])
+    assert copy.names == ("helper", "Foo")
+    for drift in ("size = 3", "\n\n@functools"):  # inside a definition, and between two of them
+        (tmp_path / "span.py").write_text(SPAN.replace(drift, drift.replace("3", "4").replace("\n\n@", "\n# new\n@")))
+        assert check(tmp_path)[0] == ["span.py:4: copy of orig.helper..Foo drifted from its original (orig.py:4)"]
+        assert check(tmp_path, fix=True)[2] == 1 and (tmp_path / "span.py").read_text() == SPAN
+
+
+def test_a_span_must_end_below_its_marker_and_hold_no_marker(tmp_path):
+    write(tmp_path, "orig.py", ORIGINAL)
+    write(tmp_path, "late.py", ORIGINAL.replace("def helper", "# Copied from orig.helper..nothing\ndef helper"))
+    write(tmp_path, "nested.py", SPAN.replace("@functools", "# Copied from orig.Foo\n@functools"))
+    problems = check(tmp_path)[0]
+    assert "late.py:4: span end nothing is not a definition below the marker" in problems
+    assert "nested.py:10: marker inside the span of line 4" in problems

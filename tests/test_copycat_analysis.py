@@ -1,6 +1,7 @@
 """copycat_analysis.py: the interventions and scores on hand-made policies (a copycat scores high, a policy
 that ignores the history zero; do(zeta) of a zeta-blind policy is zero, of a pass-through the gap), and the
 script on tiny models saved by the real bc_so.py, bc_oh.py and c2f.py (bad input, the report, the pictures)."""
+import argparse
 import importlib
 import json
 import os
@@ -11,6 +12,7 @@ import torch
 import torch.nn as nn
 import tyro
 
+import c2f
 import copycat_analysis as ca
 from conftest import assert_usage_error, link_experts, make_demos, run_script
 
@@ -117,7 +119,7 @@ def test_zeta_effect_of_a_zeta_blind_policy_is_zero_and_of_a_pass_through_the_ga
 def c2f_policy(zeta_weight: float):
     """A real C2F policy (late fusion) whose head passes zeta through with this weight and ignores the rest."""
     torch.manual_seed(0)
-    policy = ca.C2FPolicy(OBS, ACT, H, 8, torch.randn(16, H * OBS))
+    policy = ca.C2FPolicy(OBS, ACT, torch.randn(16, H * OBS), argparse.Namespace(history=H, hidden=8, **c2f.PAPER_FLAGS))
     with torch.no_grad():
         policy.head.weight.zero_()
         policy.head.bias.zero_()

@@ -117,7 +117,7 @@ def test_the_encoder_is_the_authors_batchnorm_mlp_with_their_init():
 def test_batchnorm_is_frozen_at_evaluation_and_a_reloaded_model_acts_the_same():
     """Training moves BatchNorm's running statistics, evaluation (eval mode) leaves them, and a model rebuilt from
     its saved state_dict (as scripts/evaluate.py does, on zero inputs) gives the same actions."""
-    args = fca.Args(encoder_hidden=16, embedding_dim=EMBEDDING, eval_episodes=2)
+    args = fca.Args(hidden=16, embedding_dim=EMBEDDING, eval_episodes=2)
     policy = fca.make_policy(args, OBS, ACT, torch.randn(100, OBS * HISTORY))
     stats = lambda: [buffer.clone() for name, buffer in policy.named_buffers() if "running" in name]
     before = stats()
@@ -144,7 +144,7 @@ def test_the_authors_hopper_setting_and_their_default_elsewhere():
 
 
 @pytest.mark.parametrize("flag, value, message", [("--adversary-weight", -1, "must be >= 0"), ("--adversary-lr-ratio", 0, "must be positive"),
-                                                   ("--encoder-hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive")])
+                                                   ("--hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive")])
 def test_bad_method_parameters_are_rejected(flag, value, message):
     assert_usage_error(run_in_process("fca.py", flag, value), f"{flag} {message}")
 

@@ -11,14 +11,14 @@ from conftest import REPO_ROOT
 FILES = [f"{name}.py" for name in file_sizes.TARGETS] + ["expert_ppo.py"]
 """the method files and the expert: what users copy"""
 CEILINGS = {
-    "bc_oh": 473,
-    "bc_so": 499,
-    "history_dropout": 509,
-    "c2f": 631,
-    "fca": 598,
-    "keyframe": 593,
-    "average_ensemble": 552,
-    "dagger": 680,
+    "bc_oh": 461,
+    "bc_so": 463,
+    "history_dropout": 472,
+    "c2f": 575,
+    "fca": 549,
+    "keyframe": 559,
+    "average_ensemble": 517,
+    "dagger": 605,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
