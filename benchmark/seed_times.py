@@ -1,0 +1,93 @@
+"""Training time per seed as the committed runs measured it, by run and by the machine each ran on.
+
+    python -m benchmark.seed_times [--results-dir results] [--out results/seed_times.md]
+
+Reads every result JSON under --results-dir that carries a machine record (the grid runners add one), and each
+seed's `ms_per_step`: the script's own training-loop time per step, evaluations excluded. The grid runners train two
+seeds at once on a 2-core machine, one core each, as the main job does with its default --workers. A seed's training
+time at the paper's protocol on Hopper is that times its steps: 1000 epochs of 20000 // 64 = 312 steps, and for
+DAgger 468,100 (then four rounds of 100 epochs on the growing aggregate). Results without a machine record (made
+before the runners wrote one) are counted, not used: the machine they ran on is unknown.
+"""
+import json
+from collections import defaultdict
+from pathlib import Path
+
+from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+
+HOPPER_STEPS = {"dagger": 468_100}
+"""training steps of a paper-protocol Hopper seed, where a run differs from 1000 epochs of 312 steps"""
+DEFAULT_STEPS = 312_000
+
+
+def machine_name(record: dict) -> str:
+    """The CPU as a result records it: vendor, model name and the kernels torch picked (e.g. 'AuthenticAMD AMD EPYC,
+    AVX512'); older records lack the vendor."""
+    cpu = " ".join(part for part in (record.get("cpu_vendor"), record.get("cpu")) if part) or "unknown CPU"
+    return f"{cpu}, {record['cpu_capability']}" if record.get("cpu_capability") else cpu
+
+
+def collect(results_dir) -> tuple:
+    """({(run, machine): [ms per step of each seed]}, results without a machine record). A run is the folder above the
+    env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it."""
+    times, unknown = defaultdict(list), 0
+    for path in sorted(Path(results_dir).rglob("result_seeds*.json")):
+        try:
+            result = json.loads(path.read_text())
+            entries = list(result["scores"].values())
+        except (ValueError, KeyError, AttributeError):
+            continue  # not a result of ours
+        if len(entries) != 1:
+            continue  # a summary of several seeds: its seeds have files of their own
+        ms = entries[0].get("ms_per_step") if isinstance(entries[0], dict) else None
+        if ms is None:
+            continue  # no training loop of its own (the expert's evaluation)
+        if not isinstance(result.get("machine"), dict):
+            unknown += 1
+            continue
+        times[path.parent.parent.name, machine_name(result["machine"])].append(float(ms))
+    return dict(times), unknown
+
+
+def table(times: dict, unknown: int, command: str) -> str:
+    lines = [
+        "# Training time per seed, as the committed runs measured it",
+        "",
+        f"Made by `{command}`. Each seed's own ms per training step (evaluations excluded), two seeds at once on a "
+        "2-core machine, one core each; the minutes are the training of a paper-protocol Hopper seed at those step "
+        f"times (312,000 steps; DAgger 468,100). {unknown} results without a machine record are left out.",
+        "",
+        "| run | machine | seeds | ms per step | Hopper seed, training |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for (run, machine), values in sorted(times.items()):
+        steps = HOPPER_STEPS.get(run, DEFAULT_STEPS)
+        low, high = min(values), max(values)
+        ms = f"{low:.2f}" if round(low, 2) == round(high, 2) else f"{low:.2f}–{high:.2f}"
+        minutes = [value * steps / 60_000 for value in (low, high)]
+        span = f"{minutes[0]:.1f}" if round(minutes[0], 1) == round(minutes[1], 1) else f"{minutes[0]:.1f}–{minutes[1]:.1f}"
+        lines.append(f"| `{run}` | {machine} | {len(values)} | {ms} | {span} min |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = OneLineParser(prog="python -m benchmark.seed_times", description=__doc__.splitlines()[0])
+    parser.add_argument("--results-dir", default="results")
+    parser.add_argument("--out", default="results/seed_times.md")
+    options = parser.parse_args(argv)
+    if not Path(options.results_dir).is_dir():
+        raise UsageError(f"--results-dir {options.results_dir} is not a folder: pass the folder of the committed runs")
+    times, unknown = collect(options.results_dir)
+    if not times:
+        raise UsageError(f"no result under {options.results_dir} has a machine record: run the grid runner first")
+    command = "python -m benchmark.seed_times" + (
+        "" if (options.results_dir, options.out) == ("results", "results/seed_times.md")
+        else f" --results-dir {options.results_dir} --out {options.out}")
+    text = table(times, unknown, command)
+    write_text(options.out, text)
+    print(text, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    run_cli(main)

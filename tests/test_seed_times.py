@@ -1,0 +1,46 @@
+"""benchmark/seed_times.py: each committed run's training time per step, beside the machine that measured it."""
+import json
+
+import pytest
+
+from benchmark import seed_times
+from benchmark.results import UsageError
+
+AMD = {"cpu": "AMD EPYC", "cpu_vendor": "AuthenticAMD", "cpu_capability": "AVX512"}
+XEON = {"cpu": "Intel(R) Xeon(R) Processor", "cpu_capability": "AVX512"}  # an older record: no vendor
+
+
+def write(folder, seed, ms, machine=None, seeds=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    scores = {str(s): {"score": 1.0, "evaluations": [[1, 1.0]], "ms_per_step": ms} for s in (seeds or [seed])}
+    result = {"env": "Hopper-v4", "method": "c2f", "args": {}, "scores": scores, "mean": 1.0, "std": 0.0}
+    if machine:
+        result["machine"] = machine
+    (folder / f"result_seeds{'-'.join(map(str, seeds or [seed]))}.json").write_text(json.dumps(result))
+
+
+def test_times_are_grouped_by_run_and_machine_and_priced_at_a_hopper_seeds_steps(tmp_path):
+    write(tmp_path / "runs/c2f/Hopper-v4", 1, 2.0, AMD)
+    write(tmp_path / "runs/c2f/Hopper-v4", 2, 4.0, AMD)
+    write(tmp_path / "runs/c2f/Walker2d-v4", 1, 1.0, XEON)
+    write(tmp_path / "runs/c2f/Walker2d-v4", 9, 1.0, XEON, seeds=[1, 9])  # a summary of two seeds: not counted again
+    write(tmp_path / "regimes/x/runs/dagger/Hopper-v4", 1, 1.0, AMD)
+    write(tmp_path / "runs/bc_oh/Hopper-v4", 1, 1.0)  # no machine record: counted, left out
+    times, unknown = seed_times.collect(tmp_path)
+    assert times == {("c2f", "AuthenticAMD AMD EPYC, AVX512"): [2.0, 4.0], ("c2f", "Intel(R) Xeon(R) Processor, AVX512"): [1.0],
+                     ("dagger", "AuthenticAMD AMD EPYC, AVX512"): [1.0]}
+    assert unknown == 1
+    rows = seed_times.table(times, unknown, "cmd").splitlines()
+    assert "| `c2f` | AuthenticAMD AMD EPYC, AVX512 | 2 | 2.00–4.00 | 10.4–20.8 min |" in rows  # 312,000 steps
+    assert "| `c2f` | Intel(R) Xeon(R) Processor, AVX512 | 1 | 1.00 | 5.2 min |" in rows
+    assert "| `dagger` | AuthenticAMD AMD EPYC, AVX512 | 1 | 1.00 | 7.8 min |" in rows  # 468,100 steps
+    assert "1 results without a machine record are left out" in rows[2]
+
+
+def test_no_timed_result_is_one_line(tmp_path):
+    write(tmp_path / "runs/bc_oh/Hopper-v4", 1, 1.0)
+    with pytest.raises(UsageError, match="has a machine record"):
+        seed_times.main(["--results-dir", str(tmp_path), "--out", str(tmp_path / "t.md")])
+    with pytest.raises(UsageError, match="is not a folder"):
+        seed_times.main(["--results-dir", str(tmp_path / "none")])
+
