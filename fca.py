@@ -157,7 +157,7 @@ def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> t
     loss = ((policy.predict_previous_action(embedding.detach(), actions) - previous) ** 2).mean()
     optimizer.zero_grad()
     loss.backward()
-    optimizer.step()
+    optimizer.step()  # only D has gradients (e is detached), so Adam moves only D
     return loss.detach()
 
 
