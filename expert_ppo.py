@@ -332,10 +332,8 @@ def retargeted_expert(path: str, env_id: str):
     structure = getattr(env.unwrapped, "observation_structure", {})
     observations = (env.observation_space.shape[0], structure.get("qpos", 0) + structure.get("qvel", 0))
     shapes = policy.net[0].in_features in observations and policy.net[-1].out_features == env.action_space.shape[0]
-    if made_for.split("-")[0] != env_id.split("-")[0] or not shapes:
-        raise UsageError(
-            f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s: train one for {env_id}"
-        )
+    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s: train one for {env_id}"
+    require(made_for.split("-")[0] == env_id.split("-")[0] and shapes, other)
     return policy, made_for
 
 
@@ -352,8 +350,7 @@ def eval_only(args: Args):
     native = env_frame_skip(args.env)
     if args.frame_skip is not None:
         env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
-    if args.eval_episodes <= 0:
-        raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
+    require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
     recorded = checkpoint_env(path)
     if not args.retarget and recorded not in (None, args.env) and recorded.split("-")[0] == args.env.split("-")[0]:
         raise UsageError(
@@ -367,11 +364,8 @@ def eval_only(args: Args):
     # written before frame skips were recorded were all trained at the env's own.
     trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
-    if args.ship_to and frame_skip != trained_at:  # the shipped return must be the one of the expert's own rate
-        raise UsageError(
-            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, "
-            f"drop --frame-skip {frame_skip} or --ship-to"
-        )
+    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
+    require(not args.ship_to or frame_skip == trained_at, f"{there}, drop --frame-skip {frame_skip} or --ship-to")
     if frame_skip != native:  # said only at another rate, so that the default output stays as it was
         print(
             f"evaluating at frame skip {frame_skip} (the env's own is {native}; the expert was trained at {trained_at})"
@@ -380,9 +374,8 @@ def eval_only(args: Args):
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
     if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
-        checkpoint.update(
-            eval_return=float(np.mean(returns)), eval_std=float(np.std(returns)), eval_episodes=len(returns)
-        )
+        mean, std = float(np.mean(returns)), float(np.std(returns))
+        checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
         if made_for != args.env:  # shipped for --env: load_expert accepts it there, and it says where it came from
             checkpoint.update(env_id=args.env, retargeted_from=made_for)
         save_atomically(checkpoint, args.ship_to)
@@ -537,11 +530,8 @@ def train(args: Args):
             raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --output-dir")
         # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
-        if trained_at != args.frame_skip:
-            raise UsageError(
-                f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}: "
-                f"pass --frame-skip {trained_at} or use another --output-dir"
-            )
+        rate = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
+        require(trained_at == args.frame_skip, f"{rate}: pass --frame-skip {trained_at} or use another --output-dir")
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
@@ -657,27 +647,14 @@ def train(args: Args):
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
-        print(
-            f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6} | "
-            f"value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min",
-            flush=True,
-        )
+        line = f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6}"
+        print(f"{line} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
         if global_step >= next_eval:
             next_eval += args.eval_every_steps
-            eval_return = float(
-                np.mean(
-                    evaluate(
-                        frozen_policy(),
-                        args.env,
-                        args.train_eval_episodes,
-                        seed=args.seed + global_step,
-                        frame_skip=args.frame_skip,
-                    )
-                )
-            )
-            print(
-                f"eval at step {global_step}: {eval_return:.1f} (best {max(best_return, eval_return):.1f})", flush=True
-            )
+            episodes = (frozen_policy(), args.env, args.train_eval_episodes, args.seed + global_step, args.frame_skip)
+            eval_return = float(np.mean(evaluate(*episodes)))
+            best = max(best_return, eval_return)
+            print(f"eval at step {global_step}: {eval_return:.1f} (best {best:.1f})", flush=True)
             if eval_return > best_return:
                 best_return = eval_return
                 save_atomically(checkpoint(eval_return), best_path)
