@@ -197,6 +197,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     rounds, collected, generator = [], [], torch.Generator(device=device).manual_seed(seed)
     epochs, evaluations = args.epochs + args.dagger_rounds * args.dagger_epochs, []
     progress = dict(epoch=0, epochs=epochs, start=time.time(), train_time=0.0, steps=0, evaluations=evaluations)
+    progress.update(generator=generator)  # one minibatch stream through all rounds
     for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
         if round_number > 0:  # roll out the beta-mix, label with the expert, aggregate (train_step sees the aggregate)
             beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
@@ -209,7 +210,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
             expert_fraction = float(data["expert_acted"].mean())
             rounds.append(dict(round=round_number, beta=beta, labels=num_labels, expert_fraction=expert_fraction))
             rounds[-1]["aggregate"] = len(inputs)
-        progress.update(round=round_number, generator=generator)
+        progress["round"] = round_number
         fit(args, policy, optimizer, train_step, len(inputs), seed, device, progress)
         if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
             bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
