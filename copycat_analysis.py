@@ -94,7 +94,8 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     """Indices of the joint velocities in the observation, where the paper adds its noise."""
     obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
+        inside = 0 <= min(override) and max(override) < obs_dim
+        require(inside, f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
         return sorted(set(override))
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
