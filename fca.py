@@ -197,8 +197,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     d_rate = lr_ratio * args.learning_rate
     rates = f"w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {d_rate:g}"
     print(f"seed {seed} | {rates}; adversary reference: predicting a_(t-1) = a_t has error {reference:.5f}")
-    generator_part = [*policy.encoder.parameters(), *policy.head.parameters()]  # one Adam, D a group of its own
-    groups = [{"params": generator_part}, {"params": policy.adversary.parameters(), "lr": d_rate}]
+    g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]  # one Adam, D a parameter group of its own
+    groups = [{"params": g_and_f}, {"params": policy.adversary.parameters(), "lr": d_rate}]
     optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999))
 
     def train_step(idx):  # the authors' alternating updates: the adversary D, then the encoder G and policy head F
