@@ -216,9 +216,8 @@ def run(args):
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
-        else:  # spawn, not fork: torch and MuJoCo are not fork-safe; the workers ignore Ctrl-C, this process acts
-            spawn = multiprocessing.get_context("spawn")
-            with spawn.Pool(args.workers, signal.signal, (signal.SIGINT, signal.SIG_IGN)) as pool:
+        else:  # spawn, not fork: torch and MuJoCo are not fork-safe
+            with multiprocessing.get_context("spawn").Pool(args.workers, start_worker) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
         lost = [s for s in to_train if not finished_seed(output_dir, s, args)]
@@ -254,6 +253,13 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
     workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0
     waves_after = (len(args.seeds) - 1) // workers - position // workers
     return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
+
+
+def start_worker():
+    """A pool worker leaves Ctrl-C to the main process, and writes each printed line at once: unbuffered (as with
+    PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's line could fall between them."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 
 def run_name(args) -> str:

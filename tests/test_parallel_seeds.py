@@ -43,7 +43,7 @@ def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_
     lines, evaluations, sequential, out = tiny_run(tmp_path / "one", script, 1, fixed_mode_demos)
     assert all(len(lines[seed]) == len(PINNED[script][2]) for seed in (1, 2)) and lines[1] != lines[2]
     assert lines[1] == PINNED[script][2]  # seed 1 of two prints what seed 1 alone prints
-    assert parallel_lines == lines, f"two workers printed:\n{parallel_out}\none worker printed:\n{out}"  # seen to fail once
+    assert parallel_lines == lines, f"two workers printed:\n{parallel_out}\none worker printed:\n{out}"
     assert parallel_evaluations == evaluations
     assert list(combined["scores"]) == ["1", "2"] and combined["args"]["seeds"] == [1, 2] and combined["args"]["workers"] == 2
     assert [combined["scores"][s]["evaluations"] for s in "12"] == [evaluations[1], evaluations[2]]
@@ -52,3 +52,37 @@ def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_
 
 def test_workers_must_be_positive():
     assert_usage_error(run_in_process("bc_oh.py", "--workers", 0), "--workers must be positive, got 0")
+
+
+def test_a_pool_worker_writes_each_printed_line_at_once(monkeypatch):
+    """Unbuffered (PYTHONUNBUFFERED, as this machine and the grid runner set it), print writes a line and its newline
+    in two writes, and a seed printing at the same moment can land between them (test_two_workers_train_each_seed_as_one_worker_does failed so, twice: one
+    seed's line glued to another's. start_worker makes each line one write, and leaves Ctrl-C to the main process."""
+    import io
+    import signal
+
+    import bc_oh
+
+    class Writes(io.RawIOBase):
+        def __init__(self):
+            self.writes = []
+
+        def writable(self):
+            return True
+
+        def write(self, data):
+            self.writes.append(bytes(data))
+            return len(data)
+
+    raw = Writes()
+    monkeypatch.setattr("sys.stdout", io.TextIOWrapper(raw, write_through=True))  # what PYTHONUNBUFFERED gives
+    print("seed 1 | epoch 1/3", flush=True)
+    assert raw.writes == [b"seed 1 | epoch 1/3", b"\n"]
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        bc_oh.start_worker()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    print("seed 2 | epoch 1/3", flush=True)
+    assert raw.writes[2:] == [b"seed 2 | epoch 1/3\n"]
