@@ -39,13 +39,14 @@ def collect(results_dir) -> tuple:
             continue  # not a result of ours
         if len(entries) != 1:
             continue  # a summary of several seeds: its seeds have files of their own
-        ms = entries[0].get("ms_per_step") if isinstance(entries[0], dict) else None
-        if ms is None:
-            continue  # no training loop of its own (the expert's evaluation)
+        try:
+            ms = float(entries[0]["ms_per_step"])
+        except (TypeError, KeyError, ValueError):
+            continue  # no training loop of its own (the expert's evaluation), or not a number
         if not isinstance(result.get("machine"), dict):
             unknown += 1
             continue
-        times[path.parent.parent.name, machine_name(result["machine"])].append(float(ms))
+        times[path.parent.parent.name, machine_name(result["machine"])].append(ms)
     return dict(times), unknown
 
 

@@ -26,6 +26,8 @@ def test_times_are_grouped_by_run_and_machine_and_priced_at_a_hopper_seeds_steps
     write(tmp_path / "runs/c2f/Walker2d-v4", 9, 1.0, XEON, seeds=[1, 9])  # a summary of two seeds: not counted again
     write(tmp_path / "regimes/x/runs/dagger/Hopper-v4", 1, 1.0, AMD)
     write(tmp_path / "runs/bc_oh/Hopper-v4", 1, 1.0)  # no machine record: counted, left out
+    write(tmp_path / "runs/bc_so/Hopper-v4", 1, "fast", AMD)  # not a number: skipped, not a traceback
+    (tmp_path / "runs/bc_so/Hopper-v4/result_seeds2.json").write_text("{half")  # half written: skipped
     times, unknown = seed_times.collect(tmp_path)
     assert times == {("c2f", "AuthenticAMD AMD EPYC, AVX512"): [2.0, 4.0], ("c2f", "Intel(R) Xeon(R) Processor, AVX512"): [1.0],
                      ("dagger", "AuthenticAMD AMD EPYC, AVX512"): [1.0]}
