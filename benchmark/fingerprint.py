@@ -1,6 +1,6 @@
 """Fingerprint each stage of the pinned bc_oh tiny run on this machine, in MKL's fixed mode (issue 32).
 
-    python -m benchmark.fingerprint [--out results/fingerprints] [--compare OTHER.json]
+    python -m benchmark.fingerprint [--out results/fingerprints] [--compare OTHER.json] [--default-mode]
     python -m benchmark.fingerprint --compare A.json B.json     # two stored records: no run
 
 In a temporary folder (experts/ linked in) it runs the bc_oh case of tests/test_pinned_output.py with
@@ -9,7 +9,13 @@ MKL_CBWR=COMPATIBLE (first `expert_ppo.py --make-demos` where that flag exists, 
 hex digits of the sha256 of each demo array (its tobytes(), every key but "meta") and of the trained weights (one
 sha256 over the tensors of the checkpoint's state_dict in sorted key order); the three evaluation returns; the printed
 epoch lines. Two machines whose records agree on a stage computed it bit for bit alike; compare() names the first
-stage that differs (demos -> weights -> evaluations): where the digits of two CPUs part.
+stage that differs (demos -> weights -> evaluations): where the digits of two CPUs part. With --default-mode it runs
+without MKL_CBWR (as the README's commands do) and writes <cpu_vendor>_<cpu model>_default.json.
+
+A run's stages feed each other, so once one differs every later one does too. The record therefore also holds probes:
+each stage again, alone, on inputs that every checkout holds bit for bit (committed files), so two machines' probes
+compare each stage by itself: MuJoCo stepped open loop (no torch), the shipped expert's and a committed BC-OH policy's
+forward passes on the shipped demos, that policy's closed-loop evaluation, and BC-OH trained on the shipped demos.
 """
 import hashlib
 import json
@@ -33,6 +39,16 @@ BUDGET = ["--env", ENV, "--seeds", "1", "--epochs", "3", "--eval-every", "1", "-
 """the budget of tests/test_pinned_output.py (tests/test_fingerprint.py checks that they agree)"""
 STAGES = ("demos", "weights", "evaluations")
 """the stages of a run in the order each feeds the next: compare() names the first that differs"""
+SHIPPED_DEMOS = REPO_ROOT / "demos" / f"{ENV}_20000.npz"
+SHIPPED_EXPERT = REPO_ROOT / "experts" / f"{ENV}.pt"
+PROBE_POLICY = REPO_ROOT / "results" / "h3" / "native_hidden" / "runs" / "bc_oh" / ENV / "seed1.pt"
+"""a committed BC-OH policy (velocities hidden; trained on an Intel Xeon): the same weights in every checkout"""
+PROBE_EVALUATION = dict(episodes=10, seed=11000)
+"""the policy's final evaluation in its run (seed 1, epoch 1000: --seed 10000 * 1 + 1000, its --eval-episodes 10),
+whose mean its result JSON holds as that machine computed it"""
+PROBES = ("mujoco", "expert_forward", "policy_forward", "policy_evaluation", "training")
+"""the probes in the order a run meets them: the simulator, the two networks' forward passes, a closed loop of both,
+training"""
 
 
 def digest(*chunks: bytes) -> str:
@@ -74,11 +90,15 @@ def case_commands(output_dir, separate_demos: bool) -> list:
 def run_case(folder: Path, environment: dict, separate_demos: bool) -> str:
     """Run the case's commands in `folder` (experts/ linked in); return what the method run printed."""
     (folder / "experts").symlink_to(REPO_ROOT / "experts", target_is_directory=True)
-    for command in case_commands(folder / "out", separate_demos):
-        finished = subprocess.run(command, cwd=folder, env=environment, capture_output=True, text=True)
-        if finished.returncode != 0:
-            last = (finished.stderr or finished.stdout).strip().splitlines()[-1:]
-            raise UsageError(f"{' '.join(command[1:])} failed: {last[0] if last else f'exit {finished.returncode}'}")
+    return [run_checked(command, folder, environment) for command in case_commands(folder / "out", separate_demos)][-1]
+
+
+def run_checked(command: list, cwd, environment: dict, name: str = "") -> str:
+    """What `command` printed; its last line of error as a UsageError if it failed."""
+    finished = subprocess.run(command, cwd=cwd, env=environment, capture_output=True, text=True)
+    if finished.returncode != 0:
+        last = (finished.stderr or finished.stdout).strip().splitlines()[-1:]
+        raise UsageError(f"{name or ' '.join(command[1:])} failed: {last[0] if last else f'exit {finished.returncode}'}")
     return finished.stdout
 
 
@@ -99,13 +119,94 @@ def stage_fingerprints(folder: Path, printed: str) -> dict:
     }
 
 
+def mujoco_probe(steps: int = 1000, amplitude: float = 0.5) -> str:
+    """Digest of Hopper's observations and rewards under a fixed open-loop action sequence: MuJoCo (and the C
+    library's maths) alone, no torch. It falls often, so contacts and resets are in it."""
+    import gymnasium as gym
+    import numpy as np
+
+    gym.logger.min_level = gym.logger.ERROR  # the v4 envs' deprecation warning
+    env = gym.make(ENV)
+    obs, _ = env.reset(seed=0)
+    chunks, low, high = [obs.tobytes()], env.action_space.low, env.action_space.high
+    for t in range(steps):
+        action = np.clip(amplitude * np.sin(0.05 * t + np.arange(len(low))), low, high)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        chunks += [obs.tobytes(), np.float64(reward).tobytes()]
+        if terminated or truncated:
+            obs, _ = env.reset(seed=t)
+            chunks.append(obs.tobytes())
+    env.close()
+    return digest(*chunks)
+
+
+def policy_probes(rows: int = 1000, episodes: int = PROBE_EVALUATION["episodes"], seed=PROBE_EVALUATION["seed"]) -> dict:
+    """The forward passes of the shipped expert and of PROBE_POLICY on the first `rows` states of the shipped demos
+    (as one batch, and the first 20 one at a time, as a rollout feeds them), and PROBE_POLICY's evaluation returns
+    over `episodes` episodes from `seed` (scripts/evaluate.py's loading and the method file's own evaluate)."""
+    import importlib.util
+
+    import numpy as np
+    import torch
+
+    spec = importlib.util.spec_from_file_location("evaluate", REPO_ROOT / "scripts" / "evaluate.py")
+    evaluate = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(evaluate)  # puts the repository root on sys.path: the method files import
+    module, policy, args = evaluate.load_policy(PROBE_POLICY)
+    import expert_ppo
+
+    expert = expert_ppo.load_expert(str(SHIPPED_EXPERT), ENV)
+    with np.load(SHIPPED_DEMOS) as demos:
+        observations, starts = demos["observations"][:rows], demos["episode_starts"][:rows]
+    histories = module.stack_history(observations, starts, args.history)
+
+    def forward(net, inputs) -> str:
+        inputs = torch.as_tensor(inputs, dtype=torch.float32)
+        with torch.no_grad():
+            one_by_one = [net(inputs[i : i + 1]).numpy().tobytes() for i in range(min(20, len(inputs)))]
+            return digest(net(inputs).numpy().tobytes(), *one_by_one)
+
+    returns = module.evaluate(policy, args, episodes, seed, torch.device("cpu"))
+    return {"expert_forward": forward(expert, observations), "policy_forward": forward(policy, histories),
+            "policy_evaluation": returns}
+
+
+PROBE_CODE = "import json; from benchmark import fingerprint as f; print(json.dumps({'mujoco': f.mujoco_probe(), " \
+             "**f.policy_probes()}))"
+"""run in a fresh process, so that the mode's environment variables are set before MKL starts"""
+
+
+def training_command(output_dir) -> list:
+    """The pinned case's training, on the shipped demos' first 1000 steps instead of demos made on this machine."""
+    return [sys.executable, str(REPO_ROOT / f"{METHOD}.py"), *BUDGET, "--demos", str(SHIPPED_DEMOS), "--save-model",
+            "--output-dir", str(output_dir)]
+
+
+def run_probes(folder: Path, environment: dict) -> dict:
+    """The probes' record, run under `environment` (training writes into `folder`)."""
+    printed = run_checked([sys.executable, "-c", PROBE_CODE], REPO_ROOT, environment, name="the probes")
+    probes = json.loads(printed.strip().splitlines()[-1])
+    run_checked(training_command(folder / "shipped"), folder, environment)
+    import torch
+
+    checkpoint = torch.load(folder / "shipped" / "seed1.pt", map_location="cpu", weights_only=True)
+    result = json.loads((folder / "shipped" / "result_seeds1.json").read_text())
+    evaluations = [value for _, value in result["scores"]["1"]["evaluations"]]
+    probes["training"] = {"weights": weights_fingerprint(checkpoint["state_dict"]), "evaluations": evaluations}
+    return probes
+
+
 def measure(mode: dict = FIXED_MODE) -> dict:
-    """Run the case in a temporary folder under the environment variables `mode`; return its record."""
-    environment = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1", **mode}
+    """Run the case in a temporary folder under the environment variables `mode` (empty: MKL's default mode, no
+    MKL_CBWR); return its record."""
+    dropped = () if mode else ("MKL_CBWR",)  # the default mode: as a shell without it runs the README's commands
+    environment = {name: value for name, value in os.environ.items() if name not in dropped}
+    environment.update(PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1", **mode)
     with tempfile.TemporaryDirectory(prefix="copycat-fingerprint-") as tmp:
         folder = Path(tmp)
         separate_demos = makes_demos_separately(environment)
         fingerprints = stage_fingerprints(folder, run_case(folder, environment, separate_demos))
+        fingerprints["probes"] = run_probes(folder, environment)
     return {
         "case": [" ".join([Path(command[1]).name, *command[2:]]) for command in case_commands("out", separate_demos)],
         "machine": {**machine(), **{name: environment.get(name) for name in MKL_VARIABLES}},  # as the run had them
@@ -114,8 +215,10 @@ def measure(mode: dict = FIXED_MODE) -> dict:
 
 
 def record_path(out_dir, record: dict) -> Path:
-    """<out_dir>/<cpu_vendor>_<cpu model>.json, the model's runs of other characters than [A-Za-z0-9.-] as one '_'."""
+    """<out_dir>/<cpu_vendor>_<cpu model>.json, the model's runs of other characters than [A-Za-z0-9.-] as one '_';
+    _default before .json for a record made without MKL_CBWR."""
     name = "_".join(str(record["machine"].get(key) or "unknown") for key in ("cpu_vendor", "cpu"))
+    name += "_default" * (record["machine"].get("MKL_CBWR") is None)
     return Path(out_dir) / f"{re.sub(r'[^A-Za-z0-9.-]+', '_', name).strip('_')}.json"
 
 
@@ -125,8 +228,23 @@ def compare(a: dict, b: dict):
     return next((stage for stage in STAGES if stage in a and stage in b and a[stage] != b[stage]), None)
 
 
+def probe_differences(a: dict, b: dict) -> str:
+    """Which probes two records agree on and which they do not (probes missing from either are not compared)."""
+    both = [name for name in PROBES if name in a.get("probes", {}) and name in b.get("probes", {})]
+    if not both:
+        return "no probes in both records"
+    same = [name for name in both if a["probes"][name] == b["probes"][name]]
+    differ = [name for name in both if name not in same]
+    return f"probes the same: {', '.join(same) or 'none'}; different: {', '.join(differ) or 'none'}"
+
+
 def explain(a: dict, b: dict) -> str:
-    """compare() as one line, with what differs at that stage."""
+    """compare() as one line, with what differs at that stage, then the probes."""
+    return f"{explain_run(a, b)}; {probe_differences(a, b)}"
+
+
+def explain_run(a: dict, b: dict) -> str:
+    """compare() as words, with what differs at that stage."""
     stage = compare(a, b)
     if stage is None:
         return f"the same at every stage compared ({', '.join(s for s in STAGES if s in a and s in b)})"
@@ -137,6 +255,16 @@ def explain(a: dict, b: dict) -> str:
         worst = max(abs(x - y) / max(abs(x), abs(y)) if x != y else 0.0 for x, y in zip(a[stage], b[stage]))
         return f"first stage that differs: evaluations (the demos and weights agree; up to {worst:.2g} relative)"
     return f"first stage that differs: {stage} ({a[stage]} vs {b[stage]})"
+
+
+def recorded_evaluation(record: dict) -> str:
+    """The probe policy's final evaluation here against the one its run recorded (another machine, the default mode)."""
+    import numpy as np
+
+    run = json.loads((PROBE_POLICY.parent / "result_seeds1.json").read_text())
+    recorded, here = run["scores"]["1"]["evaluations"][-1][1], float(np.mean(record["probes"]["policy_evaluation"]))
+    where = f"{run['machine']['cpu']}, MKL_CBWR={run['machine'].get('MKL_CBWR')}"
+    return f"{here!r} here, {recorded!r} recorded by its run ({where}): {abs(here - recorded) / recorded:.2g} relative"
 
 
 def read_record(path) -> dict:
@@ -151,6 +279,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="results/fingerprints", help="folder the record is written to")
     parser.add_argument("--compare", nargs="+", metavar="FILE",
                         help="a record to compare this machine's with; two: compare those, without a run")
+    parser.add_argument("--default-mode", action="store_true", help="run without MKL_CBWR (MKL picks its kernels)")
     options = parser.parse_args(argv)
     if options.compare and len(options.compare) > 2:
         raise UsageError("--compare takes one record (compared with a new run) or two")
@@ -158,11 +287,11 @@ def main(argv=None) -> int:
         print(explain(*map(read_record, options.compare)))
         return 0
     other = read_record(options.compare[0]) if options.compare else None
-    record = measure()
+    record = measure({} if options.default_mode else FIXED_MODE)
     print(json.dumps(record, indent=1))
     path = record_path(options.out, record)
     write_text(path, json.dumps(record, indent=1) + "\n")
-    print(f"record: {path}")
+    print(f"record: {path}\nthe committed policy's final evaluation: {recorded_evaluation(record)}")
     if other is not None:
         print(f"vs {options.compare[0]}: {explain(record, other)}")
     return 0

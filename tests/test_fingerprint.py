@@ -4,6 +4,7 @@ import hashlib
 import json
 import platform
 import re
+import subprocess
 import sys
 
 import numpy as np
@@ -101,7 +102,7 @@ def test_compare_skips_a_stage_one_record_lacks_and_explains_the_difference():
     partial = {key: value for key, value in RECORD.items() if key != "evaluations"}
     assert fingerprint.compare(partial, {**RECORD, **CASES["evaluations"]}) is None
     demos_differ = fingerprint.explain(RECORD, {**RECORD, **CASES["demos"]})
-    assert demos_differ == "first stage that differs: demos (actions, observations)"
+    assert demos_differ == "first stage that differs: demos (actions, observations); no probes in both records"
     intel_first = {**RECORD, "evaluations": [5.481507009074632, *RECORD["evaluations"][1:]]}
     assert "1.7e-08 relative" in fingerprint.explain(RECORD, intel_first)
 
@@ -117,10 +118,12 @@ def test_the_fingerprinted_case_is_the_pinned_bc_oh_case():
 
 
 def test_a_record_file_is_named_after_the_vendor_and_the_cpu_model(tmp_path):
-    amd = {"machine": {"cpu_vendor": "AuthenticAMD", "cpu": "AMD EPYC 9R14 96-Core Processor"}}
+    amd = {"machine": {"cpu_vendor": "AuthenticAMD", "cpu": "AMD EPYC 9R14 96-Core Processor", "MKL_CBWR": "COMPATIBLE"}}
     intel = {"machine": {"cpu_vendor": "GenuineIntel", "cpu": "Intel(R) Xeon(R) Processor"}}
     assert fingerprint.record_path(tmp_path, amd) == tmp_path / "AuthenticAMD_AMD_EPYC_9R14_96-Core_Processor.json"
-    assert fingerprint.record_path(tmp_path, intel).name == "GenuineIntel_Intel_R_Xeon_R_Processor.json"
+    assert fingerprint.record_path(tmp_path, intel).name == "GenuineIntel_Intel_R_Xeon_R_Processor_default.json"
+    fixed = {"machine": {**intel["machine"], "MKL_CBWR": "COMPATIBLE"}}
+    assert fingerprint.record_path(tmp_path, fixed).name == "GenuineIntel_Intel_R_Xeon_R_Processor.json"
 
 
 def test_compare_of_two_stored_records_runs_nothing(tmp_path, capsys):
@@ -141,3 +144,54 @@ def test_the_stored_amd_epyc_record_agrees_with_the_pins():
     assert record["evaluations"] != returns
     arrays = {"observations", "actions", "episode_starts", "rewards", "terminations", "truncations"}
     assert set(record["demos"]) == {*arrays, "final_observations"} and len(record["weights"]) == 16
+    assert set(record["probes"]) == set(fingerprint.PROBES)
+
+
+PROBED = {"mujoco": "2dd92469f3838844", "expert_forward": "8e85f2f60e550fa6", "policy_forward": "53ec3bcfb7c8469e",
+          "policy_evaluation": [554.1877473647398, 535.4060427424504],
+          "training": {"weights": "571d843f3c3f541e", "evaluations": [5.5, 5.6, 5.8]}}
+
+
+def test_probe_differences_name_each_probe_apart_from_the_run_s_first_stage():
+    torch_differs = {**PROBED, "policy_forward": "0000000000000000", "training": {**PROBED["training"], "weights": "1"}}
+    line = fingerprint.explain({**RECORD, "probes": PROBED}, {**RECORD, **CASES["demos"], "probes": torch_differs})
+    assert line.startswith("first stage that differs: demos")
+    assert line.endswith("probes the same: mujoco, expert_forward, policy_evaluation; different: policy_forward, training")
+    one_probe = {"probes": {"mujoco": PROBED["mujoco"]}}
+    assert fingerprint.probe_differences({"probes": PROBED}, one_probe) == "probes the same: mujoco; different: none"
+    assert fingerprint.probe_differences(RECORD, one_probe) == "no probes in both records"
+
+
+def test_the_probes_inputs_are_committed_so_every_checkout_holds_them_bit_for_bit():
+    for path in (fingerprint.SHIPPED_DEMOS, fingerprint.SHIPPED_EXPERT, fingerprint.PROBE_POLICY):
+        tracked = subprocess.run(["git", "ls-files", "--error-unmatch", str(path)], cwd=REPO_ROOT, capture_output=True)
+        assert tracked.returncode == 0 or not (REPO_ROOT / ".git").exists(), f"{path} is not committed"
+        assert path.is_file()
+    training = fingerprint.training_command("out")
+    assert training[training.index("--demos") + 1] == str(fingerprint.SHIPPED_DEMOS)
+    assert [flag for flag in training[2:] if flag not in ("--demos", str(fingerprint.SHIPPED_DEMOS))] == [
+        *fingerprint.BUDGET, "--save-model", "--output-dir", "out"]
+
+
+def test_the_mujoco_probe_repeats_exactly_and_sees_one_ulp_of_its_actions():
+    digest = fingerprint.mujoco_probe(steps=200)
+    assert digest == fingerprint.mujoco_probe(steps=200) and len(digest) == 16
+    assert fingerprint.mujoco_probe(steps=200, amplitude=float(np.nextafter(0.5, 1.0))) != digest
+
+
+def test_the_policy_probes_repeat_exactly_and_depend_on_the_rows():
+    first, again = fingerprint.policy_probes(rows=30, episodes=1, seed=0), fingerprint.policy_probes(rows=30, episodes=1, seed=0)
+    assert first == again and set(first) == {"expert_forward", "policy_forward", "policy_evaluation"}
+    assert len(first["policy_evaluation"]) == 1 and np.isfinite(first["policy_evaluation"][0])
+    fewer = fingerprint.policy_probes(rows=29, episodes=1, seed=0)
+    assert fewer["expert_forward"] != first["expert_forward"] and fewer["policy_forward"] != first["policy_forward"]
+
+
+def test_the_probe_s_evaluation_is_the_one_its_run_recorded():
+    """PROBE_EVALUATION is the final evaluation of the probe policy's run: its epoch and episodes, and its mean is what
+    recorded_evaluation compares with."""
+    run = json.loads((fingerprint.PROBE_POLICY.parent / "result_seeds1.json").read_text())
+    epoch, mean = run["scores"]["1"]["evaluations"][-1]
+    assert fingerprint.PROBE_EVALUATION == {"episodes": run["args"]["eval_episodes"], "seed": 10_000 * 1 + epoch}
+    line = fingerprint.recorded_evaluation({"probes": {"policy_evaluation": [mean - 1.0, mean + 1.0]}})
+    assert line.startswith(f"{mean!r} here, {mean!r} recorded by its run (Intel") and line.endswith(": 0 relative")
