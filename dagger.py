@@ -90,10 +90,7 @@ def check_dagger_args(args):
     samples, rounds = args.dagger_samples, args.dagger_rounds
     few = f"--dagger-samples {samples} is below one label per round of --dagger-rounds {rounds}"
     require(samples >= rounds, f"{few}: raise --dagger-samples or lower --dagger-rounds")
-    path = args.expert.format(env=args.env)
-    online = f"no expert for {args.env} at {path}: DAgger labels states with the expert online"
-    require(os.path.isfile(path), f"{online}; pass --expert with a checkpoint from expert_ppo.py")
-    load_expert(path, args.env)  # fails now, not after round 0, if it is not an expert for this env
+    load_expert(args.expert.format(env=args.env), args.env)  # fails now, not after round 0, if it is none for this env
 
 
 # Copied from bc_oh.mlp..make_policy
@@ -324,9 +321,8 @@ def run(args):
         sys.exit(f"interrupted: {where}: the same command trains only those")
     per_seed.update(zip(to_train, entries))
     result_path = write_result(output_dir, args, per_seed)
-    print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}")
-    for seed, entry in per_seed.items():
-        print(f"{seed:>6} | {entry['score']:8.1f} | {entry['bc_oh_score']:15.1f}")
+    rows = [f"{s:>6} | {entry['score']:8.1f} | {entry['bc_oh_score']:15.1f}" for s, entry in per_seed.items()]
+    print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}\n" + "\n".join(rows))
     print(f"result: {result_path}\n{summary_line(args, [entry['score'] for entry in per_seed.values()], meta)}")
 
 
@@ -490,14 +486,8 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        layers = [
-            nn.Linear(obs_dim, hidden),
-            nn.Tanh(),
-            nn.Linear(hidden, hidden),
-            nn.Tanh(),
-            nn.Linear(hidden, act_dim),
-        ]
-        self.net = nn.Sequential(*layers)
+        hidden_layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
+        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))  # the actor's mean, as Agent's
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())

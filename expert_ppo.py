@@ -203,14 +203,8 @@ class ExpertPolicy(nn.Module):
     def __init__(self, checkpoint: dict):
         super().__init__()
         obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        layers = [
-            nn.Linear(obs_dim, hidden),
-            nn.Tanh(),
-            nn.Linear(hidden, hidden),
-            nn.Tanh(),
-            nn.Linear(hidden, act_dim),
-        ]
-        self.net = nn.Sequential(*layers)
+        hidden_layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
+        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))  # the actor's mean, as Agent's
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())

@@ -99,7 +99,7 @@ def test_bad_dagger_settings_are_rejected(tmp_path):
                                (dict(dagger_rounds=0), "--dagger-rounds must be positive"),
                                (dict(dagger_beta_rounds=-1), "--dagger-beta-rounds must be positive"),
                                (dict(dagger_samples=0, dagger_rounds=1), "--dagger-samples 0 is below one label"),
-                               (dict(expert=str(tmp_path / "none.pt")), "no expert for Hopper-v4")):
+                               (dict(expert=str(tmp_path / "none.pt")), f"expert checkpoint {tmp_path / 'none.pt'} not found")):
         with pytest.raises(dagger.UsageError, match=re.escape(message)):
             dagger.check_dagger_args(tiny_args(dagger, **{"expert": EXPERT, **overrides}))
     with pytest.raises(dagger.UsageError, match="not Hopper-v4"):

@@ -18,7 +18,7 @@ CEILINGS = {
     "fca": 556,
     "keyframe": 566,
     "average_ensemble": 524,
-    "dagger": 613,
+    "dagger": 603,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
