@@ -20,7 +20,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from benchmark import aggregate, regime_summary
+from benchmark import aggregate, fca_compare, regime_summary
 from benchmark.paper import METHOD_NAMES
 from benchmark.regimes import REGIMES, RESULTS_DIR, runs_dir
 from benchmark.results import EXPERT, OneLineParser, UsageError, run_cli, write_text
@@ -262,8 +262,24 @@ def markdown(cells: dict, experts: dict, problems: list, command: str, results_d
     lines += method_table(cells[CONTROL_REGIME, CONTROL_ENV], CONTROL_METHODS, experts, CONTROL_ENV, paper=False)
     lines += comparison_lines(cells)
     lines += ["## How many separated, and what that means", ""] + reading(cells) + [""]
+    lines += adversary_lines(results_dir)
     lines += ["## Left out", ""] + ([f"- {problem}" for problem in problems] or ["none"]) + [""]
     return "\n".join(lines)
+
+
+def adversary_lines(results_dir: Path) -> list:
+    """FCA's adversary over training in native_hidden (reported, not a test): per env, from the logs of its finished
+    seeds 1-5, the range of each seed's largest adversary error and how many seeds exceed the bound that FCA's Table 2
+    cells declared for divergence (fca_compare.DIVERGED_ABOVE: predictions outside the action bounds)."""
+    lines = ["## FCA's adversary (reported, not a test)", "",
+             f"Each seed's largest logged adversary error (D's mean error over an epoch); a seed diverges above "
+             f"{fca_compare.DIVERGED_ABOVE:g}, the rule FCA's Table 2 cells declared (docs/regimes.md).", "",
+             f"| env | FCA mean ± std (seeds) | largest adversary error, range over seeds | seeds above "
+             f"{fca_compare.DIVERGED_ABOVE:g} |", "|---|---:|---:|---:|"]
+    for env in ENVS:
+        found = fca_compare.runs(runs_dir(REGIME, results_dir), env)
+        lines.append(f"| {env} | {fca_compare.row({seed: run for seed, run in found.items() if seed in SEEDS})} |")
+    return lines + [""]
 
 
 def plot(cells: dict, path: Path):
