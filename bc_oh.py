@@ -67,12 +67,10 @@ class Args:
     """train on the GPU"""
 
 
-# ==============================================================================================
-# The method: one MLP on the flattened history, trained by MSE
+# ---- The method: one MLP on the flattened history, trained by MSE ----
 
 
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The paper's three-layer MLP."""
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
@@ -130,8 +128,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
 
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True) -> tuple:
-    """train_step(minibatch indices) for --epochs, the learning rate decayed linearly to 0, evaluating every
-    --eval-every epochs and after the last. Returns ([(epoch, mean return)], ms per training step)."""
+    """train_step(minibatch indices) for --epochs, the rate decayed linearly to 0; returns (evaluations, ms/step)."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
@@ -158,8 +155,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     return evaluations, 1000 * train_time / step
 
 
-# ==============================================================================================
-# Evaluation
+# ---- Evaluation ----
 
 
 @torch.no_grad()
@@ -184,9 +180,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     return returns.tolist()
 
 
-# ==============================================================================================
-# Shared plumbing, identical in every method file (checked by scripts/check_copies.py): the seed loop, the
-# partially observed env, demos, history
+# ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
 
 
 def run(args):
@@ -254,15 +248,13 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
 
 
 def start_worker():
-    """A pool worker leaves Ctrl-C to the main process, and writes each printed line at once: unbuffered (as with
-    PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's line could fall between them."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a pool worker leaves Ctrl-C to the main process
+    # one write a line: unbuffered (PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # line could fall between them
 
 
 def run_name(args) -> str:
-    """METHOD, then each flag given a value other than its default (e.g. c2f__fusion-early), so that runs of other
-    settings never mix; flags that change no result are left out."""
+    """METHOD, then each flag changed from its default but those that change no result (e.g. c2f__fusion-early)."""
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
         if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
@@ -303,8 +295,8 @@ def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
 
 def summary_line(args, scores: list, meta: dict) -> str:
     """Mean ± std over the seeds, and its share of the expert's return that expert_ppo.py recorded in the demos."""
-    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed"
-    line += "s" * (len(scores) > 1)
+    plural = "s" * (len(scores) > 1)
+    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
     if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
         return line
     share = round(np.mean(scores) / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
@@ -429,8 +421,7 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
-    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
@@ -454,8 +445,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# MuJoCo 3.x warns of a deprecated attribute in gymnasium's HalfCheetah XML (and appends to ./MUJOCO_LOG.TXT) each
-# time that env is made: drop that warning, print the others.
+# MuJoCo 3.x warns (and appends to ./MUJOCO_LOG.TXT) of gymnasium's HalfCheetah XML each time it is made: drop that
 mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 

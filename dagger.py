@@ -78,8 +78,7 @@ class Args:
     """round r executes the expert with probability beta = max(0, 1 - r / this); None: --dagger-rounds"""
 
 
-# ==============================================================================================
-# The method: BC-OH, then rounds of expert labels on the learner's own states
+# ---- The method: BC-OH, then rounds of expert labels on the learner's own states ----
 
 
 def check_dagger_args(args):
@@ -94,8 +93,7 @@ def check_dagger_args(args):
 
 
 # Copied from bc_oh.mlp..make_policy
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The paper's three-layer MLP."""
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
@@ -220,8 +218,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 # (fit is this file's own: one round, its epochs numbered on from the rounds before (evaluation seeds, the log), its
 # minibatches from the one generator of all rounds; the final learner is evaluated three times)
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, progress: dict):
-    """Run train_step(minibatch indices) for the round's epochs, the learning rate decayed linearly to 0, evaluating
-    every --eval-every epochs and after the round's last into progress["evaluations"]."""
+    """train_step(minibatch indices) for the round's epochs, the rate decayed linearly to 0; evaluations: progress."""
     round_number, evaluations, generator = progress["round"], progress["evaluations"], progress["generator"]
     epochs = args.dagger_epochs if round_number else args.epochs
     steps_per_epoch = num_samples // args.batch_size
@@ -253,8 +250,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             print(f"{line} | last eval {last} | {speed} | {eta}", flush=True)
 
 
-# ==============================================================================================
-# Evaluation
+# ---- Evaluation ----
 
 
 # Copied from bc_oh.evaluate
@@ -280,9 +276,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     return returns.tolist()
 
 
-# ==============================================================================================
-# Shared plumbing, identical in every method file (checked by scripts/check_copies.py): the seed loop, the
-# partially observed env, demos, history
+# ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
 
 
 def run(args):
@@ -354,15 +348,13 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
 
 
 def start_worker():
-    """A pool worker leaves Ctrl-C to the main process, and writes each printed line at once: unbuffered (as with
-    PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's line could fall between them."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a pool worker leaves Ctrl-C to the main process
+    # one write a line: unbuffered (PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # line could fall between them
 
 
 def run_name(args) -> str:
-    """METHOD, then each flag given a value other than its default (e.g. c2f__fusion-early), so that runs of other
-    settings never mix; flags that change no result are left out."""
+    """METHOD, then each flag changed from its default but those that change no result (e.g. c2f__fusion-early)."""
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
         if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
@@ -403,8 +395,8 @@ def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
 
 def summary_line(args, scores: list, meta: dict) -> str:
     """Mean ± std over the seeds, and its share of the expert's return that expert_ppo.py recorded in the demos."""
-    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed"
-    line += "s" * (len(scores) > 1)
+    plural = "s" * (len(scores) > 1)
+    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
     if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
         return line
     share = round(np.mean(scores) / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
@@ -564,8 +556,7 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
-    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
@@ -589,8 +580,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# MuJoCo 3.x warns of a deprecated attribute in gymnasium's HalfCheetah XML (and appends to ./MUJOCO_LOG.TXT) each
-# time that env is made: drop that warning, print the others.
+# MuJoCo 3.x warns (and appends to ./MUJOCO_LOG.TXT) of gymnasium's HalfCheetah XML each time it is made: drop that
 mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 

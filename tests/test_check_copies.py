@@ -153,10 +153,10 @@ every method file copies them too."""
 
 
 def shared_plumbing():
-    """{name: original module} of bc_oh.py's blocks after its "# Shared plumbing" banner (plus evaluate and fit):
+    """{name: original module} of bc_oh.py's blocks after its "# ---- Shared plumbing" banner (plus evaluate and fit):
     bc_oh for its own, the module it copies from for any it copies itself."""
     source = (REPO_ROOT / "bc_oh.py").read_text()
-    banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# Shared plumbing"))
+    banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# ---- Shared plumbing"))
     names = {name for name, block in top_level_blocks(source).items() if block.start > banner} | SHARED_BEFORE_THE_BANNER
     copied_by_bc_oh = {name: copy.orig_module for copy in find_copies("bc_oh.py", source, []) for name in copy.names}
     return {name: copied_by_bc_oh.get(name, "bc_oh") for name in names}
