@@ -258,10 +258,10 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
     return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
 
 
-def start_worker():
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a pool worker leaves Ctrl-C to the main process
-    # one write a line: unbuffered (PYTHONUNBUFFERED), print writes a line and its newline apart, and another seed's
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # line could fall between them
+def start_worker():  # a pool worker: Ctrl-C is the main process's, and each printed line is one write
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, another seed's line could come
+    # between a line and its newline, which print writes apart
 
 
 def run_name(args) -> str:
@@ -456,7 +456,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# MuJoCo 3.x warns (and appends to ./MUJOCO_LOG.TXT) of gymnasium's HalfCheetah XML each time it is made: drop that
+# MuJoCo 3.x warns of gymnasium's HalfCheetah XML (to ./MUJOCO_LOG.TXT too) each time it is made: drop that one
 mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 
