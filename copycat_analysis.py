@@ -19,7 +19,6 @@ It prints a table and writes the pictures and a JSON report to --output-dir.
     python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
     python copycat_analysis.py --env Hopper-v4 --control runs/c2f__no-coarse-action/Hopper-v4/seed1.pt   # and the capacity control
 """
-
 import json
 import os
 import sys
@@ -41,9 +40,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
 # gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
 # ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
-mujoco.set_mju_user_warning(
-    lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr)
-)
+mujoco.set_mju_user_warning(lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr))
 METHODS = ("bc_so", "bc_oh", "c2f")
 CONTROL = "c2f_no_coarse"  # the capacity control, c2f.py --no-coarse-action: C2F's network, zeros in place of zeta
 COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green", CONTROL: "tab:gray"}
@@ -282,7 +279,8 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 # Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
+    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
@@ -297,18 +295,12 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
             return load_demos(given, env)[0]
         except UsageError as error:  # its fix "pass --frame-skip K" is the method files': here the models set the rate
             message, rate_fix, _ = str(error).partition(": pass --frame-skip")
-            raise UsageError(
-                f"{message}, the models' rate: pass --demos made at frame skip {rate}" if rate_fix else message
-            )
+            raise UsageError(f"{message}, the models' rate: pass --demos made at frame skip {rate}" if rate_fix else message)
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos")
-    print(
-        f"generating {args.num_demo_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})"
-    )
-    return generate_demos(
-        args.env, frame_skip, load_expert(expert_path, args.env), args.num_demo_samples, seed=args.seed
-    )
+    print(f"generating {args.num_demo_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})")
+    return generate_demos(args.env, frame_skip, load_expert(expert_path, args.env), args.num_demo_samples, seed=args.seed)
 
 
 # Copied from bc_oh.partially_observe
@@ -336,7 +328,8 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 # Copied from bc_oh.mlp
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP."""
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
@@ -432,39 +425,23 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, 
     control: the model of --control, a c2f.py model trained with --no-coarse-action."""
     flag = "--control" if control else "--" + method.replace("_", "-")
     if not os.path.isfile(path):
-        raise UsageError(
-            f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model"
-            f"{' --no-coarse-action' * control}`, or pass {flag} PATH"
-        )
+        raise UsageError(f"{method} model {path} not found: train one with `python {method}.py --env {env_id} --seeds 1 --save-model"
+                         f"{' --no-coarse-action' * control}`, or pass {flag} PATH")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         saved_method, saved_env, saved = checkpoint["method"], checkpoint["env_id"], checkpoint["args"]
     except Exception as error:
-        raise UsageError(
-            f"{flag} {path} is not a model saved with --save-model ({type(error).__name__}): pass a seed<S>.pt written by {method}.py"
-        )
+        raise UsageError(f"{flag} {path} is not a model saved with --save-model ({type(error).__name__}): pass a seed<S>.pt written by {method}.py")
     if saved_method != method:
-        raise UsageError(
-            f"{flag} {path} is a {saved_method} model, not {method}: pass the model written by {method}.py"
-        )
+        raise UsageError(f"{flag} {path} is a {saved_method} model, not {method}: pass the model written by {method}.py")
     if saved_env != env_id:
-        raise UsageError(
-            f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}"
-        )
+        raise UsageError(f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}")
     if method == "c2f" and saved.get("coarse_action", True) == control:
-        raise UsageError(
-            f"{flag} {path} is a c2f model trained with{'out' * control} --no-coarse-action: pass "
-            + ("C2F's own model as --c2f" if saved.get("coarse_action", True) else "it as --control (it reads no zeta)")
-        )
+        raise UsageError(f"{flag} {path} is a c2f model trained with{'out' * control} --no-coarse-action: pass "
+                         + ("C2F's own model as --c2f" if saved.get("coarse_action", True) else "it as --control (it reads no zeta)"))
     if method == "c2f" and saved.get("coarse_output") == "feature":
-        raise UsageError(
-            f"{flag} {path} passes a feature, not an action zeta, to its policy model: do(zeta) needs a C2F model trained with --coarse-output action"
-        )
-    history, hidden, inputs = (
-        saved["history"],
-        saved["hidden"],
-        torch.zeros(2, obs_dim * saved["history"]),
-    )  # the Normalizer's statistics come from the state_dict
+        raise UsageError(f"{flag} {path} passes a feature, not an action zeta, to its policy model: do(zeta) needs a C2F model trained with --coarse-output action")
+    history, hidden, inputs = saved["history"], saved["hidden"], torch.zeros(2, obs_dim * saved["history"])  # the Normalizer's statistics come from the state_dict
     if method == "bc_so":
         policy = SOPolicy(obs_dim, act_dim, history, hidden, inputs)
     elif method == "bc_oh":
@@ -474,9 +451,7 @@ def load_model(path: str, method: str, env_id: str, obs_dim: int, act_dim: int, 
     try:
         policy.load_state_dict(checkpoint["state_dict"])
     except RuntimeError:
-        raise UsageError(
-            f"{flag} {path}: its weights do not fit a {method} policy with history {history} on {env_id}'s {obs_dim}-d observations: re-save it with {method}.py"
-        )
+        raise UsageError(f"{flag} {path}: its weights do not fit a {method} policy with history {history} on {env_id}'s {obs_dim}-d observations: re-save it with {method}.py")
     return policy.eval(), saved
 
 
@@ -510,10 +485,7 @@ def zeta_intervention(policy: C2FPolicy, low: np.ndarray, high: np.ndarray):
     def final(histories: np.ndarray, zeta: np.ndarray) -> np.ndarray:
         obs_history = torch.as_tensor(histories, dtype=torch.float32)
         fixed, feature = torch.as_tensor(zeta, dtype=torch.float32), policy.coarse_model(obs_history)[1]
-        policy.coarse_model = lambda _: (
-            fixed,
-            feature,
-        )  # shadows the method for one call: the rest of the forward is the trained one
+        policy.coarse_model = lambda _: (fixed, feature)  # shadows the method for one call: the rest of the forward is the trained one
         try:
             return policy.coarse_and_final(obs_history)[1].numpy().clip(low, high)
         finally:
@@ -573,9 +545,7 @@ def zeta_effect(final, histories: np.ndarray, zeta: np.ndarray, lo: np.ndarray, 
 # Rollouts of each policy in the noisy env
 
 
-def rollout(
-    act, env_id: str, frame_skip: Optional[int], dims: list, std: float, hide: bool, history: int, seed: int
-) -> dict:
+def rollout(act, env_id: str, frame_skip: Optional[int], dims: list, std: float, hide: bool, history: int, seed: int) -> dict:
     """One episode of the deterministic policy on the partially observed env: its histories, executed
     actions, observations (the positions are noise-free) and return."""
     env = PartialObservation(make_env(env_id, frame_skip), dims, std, hide, seed)
@@ -602,26 +572,12 @@ def with_previous(episodes: list):
 # ----------------------------------------------------------------------------------------------
 # Pictures
 
-ACTION_NAMES = {
-    "Hopper": ["thigh", "leg", "foot"],
-    "Walker2d": ["right thigh", "right leg", "right foot", "left thigh", "left leg", "left foot"],
-}
-STATE_ROWS = {
-    "Hopper": [(0, "torso height (m)"), (2, "thigh angle (rad)")],
-    "Walker2d": [(0, "torso height (m)"), (2, "right thigh angle (rad)")],
-}
+ACTION_NAMES = {"Hopper": ["thigh", "leg", "foot"], "Walker2d": ["right thigh", "right leg", "right foot", "left thigh", "left leg", "left foot"]}
+STATE_ROWS = {"Hopper": [(0, "torso height (m)"), (2, "thigh angle (rad)")], "Walker2d": [(0, "torso height (m)"), (2, "right thigh angle (rad)")]}
 
 
-def plot_zeta_effect(
-    path: str,
-    env_id: str,
-    effect: np.ndarray,
-    observations: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    episode_return: float,
-    late_fusion: bool,
-):
+def plot_zeta_effect(path: str, env_id: str, effect: np.ndarray, observations: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                     episode_return: float, late_fusion: bool):
     """CE_d / (hi_d - lo_d) along one trajectory (1: the action follows zeta fully, 0: ignores it), the state beneath."""
     family = env_id.split("-")[0]
     names = ACTION_NAMES.get(family, [f"a[{d}]" for d in range(effect.shape[1])])
@@ -630,16 +586,9 @@ def plot_zeta_effect(
         top.plot(effect[:, d] / (hi[d] - lo[d]), lw=1, label=f"{names[d]}: do(zeta) = {lo[d]:.2f} vs {hi[d]:.2f}")
     top.set_ylabel("CE / (hi - lo)")
     if late_fusion:  # late or output fusion: one linear layer after the join, so the effect is a weight of it
-        fig.text(
-            0.01,
-            0.01,
-            "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = |its weight on zeta_d| wherever the "
-            "action is not clipped at its bounds (dips: clipped)",
-            fontsize=8,
-        )
-    top.set_title(
-        f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta"
-    )
+        fig.text(0.01, 0.01, "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = |its weight on zeta_d| wherever the "
+                 "action is not clipped at its bounds (dips: clipped)", fontsize=8)
+    top.set_title(f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta")
     top.legend(loc="upper right", fontsize=8)
     top.grid(alpha=0.3)
     rows = STATE_ROWS.get(family, [(0, "obs[0]"), (1, "obs[1]")])
@@ -661,19 +610,10 @@ def plot_history_intervention(path: str, env_id: str, changes: dict):
         top = max(float(np.quantile(np.concatenate(list(per_method.values())), 0.99)), 1e-3)
         bins = np.linspace(0, top, 41)
         for method, change in per_method.items():
-            ax.hist(
-                np.minimum(change, top),
-                bins,
-                weights=np.full(len(change), 1 / len(change)),
-                histtype="step",
-                lw=1.5,
-                color=COLORS[method],
-                label=f"{method} (mean {change.mean():.3f})",
-            )
+            ax.hist(np.minimum(change, top), bins, weights=np.full(len(change), 1 / len(change)), histtype="step", lw=1.5,
+                    color=COLORS[method], label=f"{method} (mean {change.mean():.3f})")
         ax.set_yscale("log")
-        ax.set_xlabel(
-            "mean |pi(o_hist) - pi(do(o_hist) = [o_t, ..., o_t])| / demo action std\n(above the 99th percentile: last bin)"
-        )
+        ax.set_xlabel("mean |pi(o_hist) - pi(do(o_hist) = [o_t, ..., o_t])| / demo action std\n(above the 99th percentile: last bin)")
         ax.set_ylabel("fraction of steps")
         ax.set_title(f"{env_id}: intervention on the history, {source}")
         ax.legend(fontsize=8)
@@ -717,23 +657,11 @@ def run(args):
     if args.control:
         paths[CONTROL] = args.control.format(env=args.env)
         models[CONTROL], saved[CONTROL] = load_model(paths[CONTROL], "c2f", args.env, obs_dim, act_dim, control=True)
-    model_history = agreed(
-        saved,
-        "history",
-        "--history",
-        tuple(m for m in saved if m != "bc_so"),
-        "pass models trained with one history length",
-    )  # BC-SO reads o_t only: any history fits it
+    model_history = agreed(saved, "history", "--history", tuple(m for m in saved if m != "bc_so"), "pass models trained with one history length")  # BC-SO reads o_t only: any history fits it
     history = args.history or model_history
     if history != model_history:
-        raise UsageError(
-            f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}"
-        )
-    std = (
-        agreed(saved, "obs_noise_std", "--obs-noise-std", fix="pass --obs-noise-std for the analysis")
-        if args.obs_noise_std is None
-        else args.obs_noise_std
-    )
+        raise UsageError(f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}")
+    std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix="pass --obs-noise-std for the analysis") if args.obs_noise_std is None else args.obs_noise_std
     dims = velocity_dims(env, args.env, agreed(saved, "velocity_dims", "--velocity-dims"))
     frame_skip = agreed(saved, "frame_skip", "--frame-skip")  # None (models made before the flag): the env's own
     hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
@@ -747,13 +675,7 @@ def run(args):
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
     actors = {method: as_actor(model, low, high) for method, model in models.items()}
-    rollouts = {
-        method: [
-            rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i)
-            for i in range(args.eval_episodes)
-        ]
-        for method in models
-    }
+    rollouts = {method: [rollout(actors[method], args.env, frame_skip, dims, std, hide, history, 1000 * args.seed + i) for i in range(args.eval_episodes)] for method in models}
     changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
     for method in models:
         change, towards = history_intervention(actors[method], histories[steps], obs_dim, actions[steps - 1], scale)
@@ -763,10 +685,8 @@ def run(args):
         report[method] = {
             "model": paths[method],
             "rollout_returns": [episode["return"] for episode in rollouts[method]],
-            "history_change_demos": float(change.mean()),
-            "towards_previous_demos": float(towards.mean()),
-            "history_change_rollouts": float(roll_change.mean()),
-            "towards_previous_rollouts": float(roll_towards.mean()),
+            "history_change_demos": float(change.mean()), "towards_previous_demos": float(towards.mean()),
+            "history_change_rollouts": float(roll_change.mean()), "towards_previous_rollouts": float(roll_towards.mean()),
             "copycat_score": copycat_score(actors[method](histories), actions, points, scale),
         }
     coarse, final = zeta_intervention(models["c2f"], low, high)
@@ -774,63 +694,28 @@ def run(args):
     effect_demos = zeta_effect(final, histories, coarse(histories), lo, hi)
     effect_rollouts = zeta_effect(final, c2f_histories, coarse(c2f_histories), lo, hi)
     first = rollouts["c2f"][0]
-    zeta = {
-        "lo": lo.tolist(),
-        "hi": hi.tolist(),
-        "effect_demos": effect_demos.mean(0).tolist(),
-        "effect_rollouts": effect_rollouts.mean(0).tolist(),
-        "relative_demos": (effect_demos.mean(0) / (hi - lo)).tolist(),
-        "relative_rollouts": (effect_rollouts.mean(0) / (hi - lo)).tolist(),
-    }
+    zeta = {"lo": lo.tolist(), "hi": hi.tolist(), "effect_demos": effect_demos.mean(0).tolist(), "effect_rollouts": effect_rollouts.mean(0).tolist(),
+            "relative_demos": (effect_demos.mean(0) / (hi - lo)).tolist(), "relative_rollouts": (effect_rollouts.mean(0) / (hi - lo)).tolist()}
 
     out_dir = args.output_dir.format(env=args.env)
-    plot_zeta_effect(
-        os.path.join(out_dir, "zeta_effect.png"),
-        args.env,
-        effect_rollouts[: len(first["actions"])],
-        first["observations"],
-        lo,
-        hi,
-        first["return"],
-        saved["c2f"]["fusion"] in ("late", "output"),
-    )
+    plot_zeta_effect(os.path.join(out_dir, "zeta_effect.png"), args.env, effect_rollouts[: len(first["actions"])], first["observations"], lo, hi, first["return"],
+                     saved["c2f"]["fusion"] in ("late", "output"))
     plot_history_intervention(os.path.join(out_dir, "history_intervention.png"), args.env, changes)
-    summary = {
-        "env": args.env,
-        "args": asdict(args),
-        "history": history,
-        "obs_noise_std": std,
-        "frame_skip": frame_skip,
-        "hide_velocities": hide,
-        "demo_steps": len(actions),
-        "changepoints": len(points),
-        "action_std": scale.tolist(),
-        "methods": report,
-        "zeta": zeta,
-    }
-    write_atomically(
-        os.path.join(out_dir, "copycat_analysis.json"), lambda file: file.write(json.dumps(summary, indent=1).encode())
-    )
+    summary = {"env": args.env, "args": asdict(args), "history": history, "obs_noise_std": std, "frame_skip": frame_skip, "hide_velocities": hide, "demo_steps": len(actions),
+               "changepoints": len(points), "action_std": scale.tolist(), "methods": report, "zeta": zeta}
+    write_atomically(os.path.join(out_dir, "copycat_analysis.json"), lambda file: file.write(json.dumps(summary, indent=1).encode()))
 
-    print(
-        f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, {'velocities hidden' if hide else f'noise std {std}'}, history {history}, frame skip {frame_skip or 'native'}"
-    )
+    print(f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, {'velocities hidden' if hide else f'noise std {std}'}, history {history}, frame skip {frame_skip or 'native'}")
     print("do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}")
-    print(
-        f"{'method':>13} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}"
-    )
+    print(f"{'method':>13} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}")
     for method, row in report.items():
-        print(
-            f"{method:>13} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
-            f"{row['history_change_rollouts']:15.3f} | {row['towards_previous_rollouts']:7.2f} | {row['copycat_score']:13.2f}"
-        )
+        print(f"{method:>13} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
+              f"{row['history_change_rollouts']:15.3f} | {row['towards_previous_rollouts']:7.2f} | {row['copycat_score']:13.2f}")
     print("do(zeta), c2f: CE = |pi(do(zeta_d) = lo_d) - pi(do(zeta_d) = hi_d)|_d, and CE / (hi - lo)")
     print(f"{'dim':>3} | {'lo':>6} | {'hi':>6} | {'CE demos':>8} | {'rel':>5} | {'CE rollouts':>11} | {'rel':>5}")
     for d in range(act_dim):
-        print(
-            f"{d:>3} | {lo[d]:6.2f} | {hi[d]:6.2f} | {zeta['effect_demos'][d]:8.3f} | {zeta['relative_demos'][d]:5.2f} | "
-            f"{zeta['effect_rollouts'][d]:11.3f} | {zeta['relative_rollouts'][d]:5.2f}"
-        )
+        print(f"{d:>3} | {lo[d]:6.2f} | {hi[d]:6.2f} | {zeta['effect_demos'][d]:8.3f} | {zeta['relative_demos'][d]:5.2f} | "
+              f"{zeta['effect_rollouts'][d]:11.3f} | {zeta['relative_rollouts'][d]:5.2f}")
     print(f"pictures and report: {out_dir}/ (zeta_effect.png, history_intervention.png, copycat_analysis.json)")
 
 
