@@ -279,8 +279,7 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 # Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, copying the previous action
-    predicts the expert well (a copycat shortcut exists); near 2, it is no better than chance."""
+    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
     step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
     return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
 
@@ -328,8 +327,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 # Copied from bc_oh.mlp
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The paper's three-layer MLP."""
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
 
