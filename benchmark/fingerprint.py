@@ -46,9 +46,11 @@ PROBE_POLICY = REPO_ROOT / "results" / "h3" / "native_hidden" / "runs" / "bc_oh"
 PROBE_EVALUATION = dict(episodes=10, seed=11000)
 """the policy's final evaluation in its run (seed 1, epoch 1000: --seed 10000 * 1 + 1000, its --eval-episodes 10),
 whose mean its result JSON holds as that machine computed it"""
-PROBES = ("mujoco", "expert_forward", "policy_forward", "policy_evaluation", "training")
-"""the probes in the order a run meets them: the simulator, the two networks' forward passes, a closed loop of both,
-training"""
+PROBES = ("libm", "mujoco", "expert_forward", "policy_forward", "policy_evaluation", "training")
+"""the probes in the order a run meets them: the C library's maths, the simulator, the two networks' forward passes, a
+closed loop of both, training"""
+LIBM_FUNCTIONS = ("exp", "log", "sin", "cos", "pow", "atan2", "tanh")
+"""the C library's functions the libm probe calls (MuJoCo's and gymnasium's maths)"""
 
 
 def digest(*chunks: bytes) -> str:
@@ -119,6 +121,26 @@ def stage_fingerprints(folder: Path, printed: str) -> dict:
     }
 
 
+def libm_probe(count: int = 2000, library: str = None) -> str:
+    """Digest of the C library's exp, log, sin, cos, pow, atan2 and tanh, called directly (ctypes), on `count` fixed
+    arguments in [-20, 20]: which code the library picks for this CPU (glibc: FMA or SSE2) shows in their last bits."""
+    import ctypes
+    import ctypes.util
+
+    import numpy as np
+
+    libm = ctypes.CDLL(library or ctypes.util.find_library("m") or "libm.so.6")
+    xs, values = np.linspace(-20.0, 20.0, count) + 1e-3 * np.sin(np.arange(count)), []
+    for name in LIBM_FUNCTIONS:
+        function, two = getattr(libm, name), name in ("pow", "atan2")
+        function.restype, function.argtypes = ctypes.c_double, [ctypes.c_double] * (1 + two)
+        if two:
+            values += [function(abs(x) + 0.1, x / 7) for x in xs]
+        else:
+            values += [function(abs(x) + 1e-3 if name == "log" else x) for x in xs]
+    return digest(np.array(values).tobytes())
+
+
 def mujoco_probe(steps: int = 1000, amplitude: float = 0.5) -> str:
     """Digest of Hopper's observations and rewards under a fixed open-loop action sequence: MuJoCo (and the C
     library's maths) alone, no torch. It falls often, so contacts and resets are in it."""
@@ -171,8 +193,8 @@ def policy_probes(rows: int = 1000, episodes: int = PROBE_EVALUATION["episodes"]
             "policy_evaluation": returns}
 
 
-PROBE_CODE = "import json; from benchmark import fingerprint as f; print(json.dumps({'mujoco': f.mujoco_probe(), " \
-             "**f.policy_probes()}))"
+PROBE_CODE = "import json; from benchmark import fingerprint as f; print(json.dumps({'libm': f.libm_probe(), " \
+             "'mujoco': f.mujoco_probe(), **f.policy_probes()}))"
 """run in a fresh process, so that the mode's environment variables are set before MKL starts"""
 
 

@@ -2,6 +2,7 @@
 No training run: the fingerprint functions get small hand-made inputs, and the stored record is read as written."""
 import hashlib
 import json
+import os
 import platform
 import re
 import subprocess
@@ -59,6 +60,31 @@ def test_cpuinfo_fields_and_the_one_line_description():
               "MKL_CBWR": "COMPATIBLE", "MKL_ENABLE_INSTRUCTIONS": None}
     assert machine.describe(record) == "AuthenticAMD AMD EPYC, AVX512, glibc 2.36, MKL_CBWR=COMPATIBLE"
     assert machine.describe({**record, "MKL_CBWR": None, "libc": None}) == "AuthenticAMD AMD EPYC, AVX512"
+    assert machine.describe({**record, "fma_avx2": False}).startswith("AuthenticAMD AMD EPYC, AVX512, no FMA/AVX2, glibc")
+    assert machine.describe({**record, "fma_avx2": True}) == machine.describe(record)
+    assert machine.cpu_flags(text + "flags\t\t: fpu sse2 fma avx2\n") == {"fpu", "sse2", "fma", "avx2"}
+    assert machine.cpu_flags(text) == set()
+
+
+@pytest.mark.skipif(not machine.cpu_flags(), reason="no CPU flags here (/proc/cpuinfo is Linux's)")
+def test_the_machine_record_says_whether_the_cpu_has_fma_and_avx2():
+    assert machine.machine()["fma_avx2"] == ({"fma", "avx2"} <= machine.cpu_flags())
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc" or not machine.LIBM_FMA_FLAGS <= machine.cpu_flags(),
+                    reason="glibc's FMA code, on a CPU with FMA and AVX2, is what is hidden here")
+def test_the_libm_probe_sees_glibc_choose_other_code_without_fma_and_the_pins_then_skip():
+    """GLIBC_TUNABLES hides FMA from glibc alone (torch and MKL read the CPU themselves): libm's digits change, and
+    the pinned tests know they no longer hold."""
+    code = "import test_pinned_output as t; from benchmark import fingerprint as f; print(f.libm_probe(), t.LIBM_AS_PINNED)"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), str(REPO_ROOT / "tests")])}
+    runs = [subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True,
+                           env={**env, "GLIBC_TUNABLES": tunables}) for tunables in ("", "glibc.cpu.hwcaps=-FMA")]
+    assert [run.returncode for run in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    (native, pinned_here), (without_fma, pinned_there) = (run.stdout.split() for run in runs)
+    assert native == fingerprint.libm_probe() and len(native) == 16 and native != without_fma
+    assert (pinned_here, pinned_there) == ("True", "False")
+    assert fingerprint.libm_probe(count=200) != native
 
 
 def state_dict(seed=0) -> dict:

@@ -5,7 +5,7 @@ import re
 
 from conftest import assert_usage_error, link_experts, run_in_process, run_script
 import pytest
-from test_pinned_output import BUDGET, FIXED_MODE, PINNED
+from test_pinned_output import BUDGET, FIXED_MODE, LIBM_AS_PINNED, PINNED
 
 TWO_SEEDS = (*BUDGET[:BUDGET.index("--seeds")], *BUDGET[BUDGET.index("--seeds") + 2:], "--seeds", 1, 2)
 """test_pinned_output's tiny budget, with two seeds"""
@@ -42,7 +42,7 @@ def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_
     parallel_lines, parallel_evaluations, combined, parallel_out = tiny_run(tmp_path / "two", script, 2, fixed_mode_demos)
     lines, evaluations, sequential, out = tiny_run(tmp_path / "one", script, 1, fixed_mode_demos)
     assert all(len(lines[seed]) == len(PINNED[script][2]) for seed in (1, 2)) and lines[1] != lines[2]
-    assert lines[1] == PINNED[script][2]  # seed 1 of two prints what seed 1 alone prints
+    assert lines[1] == PINNED[script][2] or not LIBM_AS_PINNED  # seed 1 of two prints what seed 1 alone prints
     assert parallel_lines == lines, f"two workers printed:\n{parallel_out}\none worker printed:\n{out}"
     assert parallel_evaluations == evaluations
     assert list(combined["scores"]) == ["1", "2"] and combined["args"]["seeds"] == [1, 2] and combined["args"]["workers"] == 2

@@ -152,6 +152,6 @@ def test_a_grid_log_names_no_machine_path_and_records_the_machine(tmp_path):
     shown = run_grid.shown_command(["/usr/bin/python3", "c2f.py", "--output-dir", str(results), "--demos", str(tmp_path / "d.npz")])
     assert shown == ["c2f.py", "--output-dir", "results/x/c2f/Hopper-v4", "--demos", str(tmp_path / "d.npz")]
     record = run_grid.machine()  # benchmark.machine's record: the method files no longer write one
-    assert set(record) == {"cpu", "cpu_vendor", "cpu_capability", "MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "libc", "os", "python",
+    assert set(record) == {"cpu", "cpu_vendor", "cpu_capability", "MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "fma_avx2", "GLIBC_TUNABLES", "libc", "os", "python",
                            "torch", "numpy", "mujoco", "gymnasium"}
     assert record["torch"] == __import__("torch").__version__ and record["python"] == platform.python_version()
