@@ -250,13 +250,27 @@ def compare(a: dict, b: dict):
     return next((stage for stage in STAGES if stage in a and stage in b and a[stage] != b[stage]), None)
 
 
+def relative_range(xs: list, ys: list):
+    """'X to Y relative': the least and the most relative difference of two equally long lists of numbers that differ;
+    None when they are equal or cannot be paired."""
+    if not (isinstance(xs, list) and isinstance(ys, list) and len(xs) == len(ys) and xs != ys):
+        return None
+    gaps = [abs(x - y) / max(abs(x), abs(y)) if x != y else 0.0 for x, y in zip(xs, ys)]
+    return f"{min(gaps):.2g} to {max(gaps):.2g} relative"
+
+
 def probe_differences(a: dict, b: dict) -> str:
-    """Which probes two records agree on and which they do not (probes missing from either are not compared)."""
+    """Which probes two records agree on and which they do not (probes missing from either are not compared), with how
+    far the returns of a differing probe that holds some lie apart."""
     both = [name for name in PROBES if name in a.get("probes", {}) and name in b.get("probes", {})]
     if not both:
         return "no probes in both records"
     same = [name for name in both if a["probes"][name] == b["probes"][name]]
-    differ = [name for name in both if name not in same]
+    differ = []
+    for name in (name for name in both if name not in same):
+        x, y = a["probes"][name], b["probes"][name]
+        gap = relative_range(*((x.get("evaluations"), y.get("evaluations")) if isinstance(x, dict) else (x, y)))
+        differ.append(f"{name} (returns {gap})" if gap else name)
     return f"probes the same: {', '.join(same) or 'none'}; different: {', '.join(differ) or 'none'}"
 
 
@@ -266,17 +280,19 @@ def explain(a: dict, b: dict) -> str:
 
 
 def explain_run(a: dict, b: dict) -> str:
-    """compare() as words, with what differs at that stage."""
+    """compare() as words, with what differs at that stage (and how far the evaluations then lie apart)."""
     stage = compare(a, b)
     if stage is None:
         return f"the same at every stage compared ({', '.join(s for s in STAGES if s in a and s in b)})"
+    gap = relative_range(a.get("evaluations"), b.get("evaluations"))
+    if stage == "evaluations" and gap:
+        return f"first stage that differs: evaluations (the demos and weights agree; {gap})"
     if stage == "demos":
         arrays = sorted(key for key in {*a[stage], *b[stage]} if a[stage].get(key) != b[stage].get(key))
-        return f"first stage that differs: demos ({', '.join(arrays)})"
-    if stage == "evaluations" and len(a[stage]) == len(b[stage]):
-        worst = max(abs(x - y) / max(abs(x), abs(y)) if x != y else 0.0 for x, y in zip(a[stage], b[stage]))
-        return f"first stage that differs: evaluations (the demos and weights agree; up to {worst:.2g} relative)"
-    return f"first stage that differs: {stage} ({a[stage]} vs {b[stage]})"
+        line = f"first stage that differs: demos ({', '.join(arrays)})"
+    else:
+        line = f"first stage that differs: {stage} ({a[stage]} vs {b[stage]})"
+    return f"{line}; evaluations {gap}" if gap and stage != "evaluations" else line
 
 
 def recorded_evaluation(record: dict) -> str:

@@ -131,9 +131,12 @@ def test_compare_skips_a_stage_one_record_lacks_and_explains_the_difference():
     partial = {key: value for key, value in RECORD.items() if key != "evaluations"}
     assert fingerprint.compare(partial, {**RECORD, **CASES["evaluations"]}) is None
     demos_differ = fingerprint.explain(RECORD, {**RECORD, **CASES["demos"]})
-    assert demos_differ == "first stage that differs: demos (actions, observations); no probes in both records"
+    assert demos_differ == "first stage that differs: demos (actions, observations); evaluations 1 to 1 relative; no probes in both records"
     intel_first = {**RECORD, "evaluations": [5.481507009074632, *RECORD["evaluations"][1:]]}
-    assert "1.7e-08 relative" in fingerprint.explain(RECORD, intel_first)
+    assert "evaluations (the demos and weights agree; 0 to 1.7e-08 relative)" in fingerprint.explain(RECORD, intel_first)
+    weights_differ = fingerprint.explain_run(RECORD, {**RECORD, "weights": "1", "evaluations": [5.5, 5.575409403353340, 5.7]})
+    assert weights_differ.startswith("first stage that differs: weights (") and weights_differ.endswith("; evaluations 0 to 0.011 relative")
+    assert fingerprint.relative_range([1.0, 2.0], [1.0, 2.0]) is None and fingerprint.relative_range([1.0], [1.0, 2.0]) is None
 
 
 def test_the_fingerprinted_case_is_the_pinned_bc_oh_case():
@@ -188,6 +191,10 @@ def test_probe_differences_name_each_probe_apart_from_the_run_s_first_stage():
     assert line.endswith("probes the same: mujoco, expert_forward, policy_evaluation; different: policy_forward, training")
     one_probe = {"probes": {"mujoco": PROBED["mujoco"]}}
     assert fingerprint.probe_differences({"probes": PROBED}, one_probe) == "probes the same: mujoco; different: none"
+    moved = {**PROBED, "policy_evaluation": [554.1877473647398, 535.4060427424504 * (1 + 1e-6)],
+             "training": {**PROBED["training"], "evaluations": [5.5, 5.6, 5.9]}}
+    assert fingerprint.probe_differences({"probes": PROBED}, {"probes": moved}).endswith(
+        "different: policy_evaluation (returns 0 to 1e-06 relative), training (returns 0 to 0.017 relative)")
     assert fingerprint.probe_differences(RECORD, one_probe) == "no probes in both records"
 
 
