@@ -77,9 +77,7 @@ def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's
     return nn.Sequential(*layers)
 
 
-class Normalizer(nn.Module):
-    """Standardises inputs with statistics of the training demos, stored with the model."""
-
+class Normalizer(nn.Module):  # standardises inputs with statistics of the training demos, stored with the model
     def __init__(self, inputs: torch.Tensor):
         super().__init__()
         self.register_buffer("mean", inputs.mean(0))
@@ -89,9 +87,7 @@ class Normalizer(nn.Module):
         return (x - self.mean) / self.std
 
 
-class Policy(nn.Module):
-    """BC-OH: the whole history, flattened, into one MLP."""
-
+class Policy(nn.Module):  # BC-OH: the whole history, flattened, into one MLP
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
@@ -102,9 +98,7 @@ class Policy(nn.Module):
 
 
 # Copied from bc_so.Policy with Policy->CurrentFramePolicy
-class CurrentFramePolicy(nn.Module):
-    """BC-SO: only the current frame o_t, the last obs_dim entries of the stacked history, into one MLP."""
-
+class CurrentFramePolicy(nn.Module):  # BC-SO: only o_t, the last obs_dim entries of the history, into one MLP
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs[:, -obs_dim:])
@@ -200,8 +194,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 # Copied from bc_oh.evaluate
 @torch.no_grad()
-def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """Returns of `episodes` parallel episodes of the deterministic policy on the partially observed env."""
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
     env = make_env(args.env, args.frame_skip)
     dims, low, high = velocity_dims(env, args.env, args.velocity_dims), env.action_space.low, env.action_space.high
     noise, skip = (args.obs_noise_std, args.hide_velocities), args.frame_skip
@@ -224,8 +217,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
 
 
-def run(args):
-    """Check the input, load the demos, train each seed not yet finished (each written when it ends), report."""
+def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed
     env = make_env(args.env)
@@ -269,7 +261,6 @@ def run(args):
 
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    """Train one seed, save its model (with --save-model) and its result_seeds<seed>.json; returns its entry."""
     torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
@@ -289,8 +280,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
 
 
 # Copied from bc_oh.job_eta..stack_history
-def job_eta(args, seed: int, start: float, done: float) -> str:
-    """The whole job's time left, seen from one seed: its own rest, then the waves of seeds still to start after it."""
+def job_eta(args, seed: int, start: float, done: float) -> str:  # whole job: this seed's rest, then waves after it
     workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0
     waves_after = (len(args.seeds) - 1) // workers - position // workers
     return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
@@ -298,12 +288,10 @@ def job_eta(args, seed: int, start: float, done: float) -> str:
 
 def start_worker():  # a pool worker: Ctrl-C is the main process's, and each printed line is one write
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, another seed's line could come
-    # between a line and its newline, which print writes apart
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # not unbuffered: print writes "\n" apart
 
 
-def run_name(args) -> str:
-    """METHOD, then each flag changed from its default but those that change no result (e.g. c2f__fusion-early)."""
+def run_name(args) -> str:  # METHOD, then each flag changed from its default that changes results (c2f__fusion-early)
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
         if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
@@ -315,8 +303,7 @@ def run_name(args) -> str:
 
 
 def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
-    """The seed's entry, if an earlier run recorded it with these settings (and with --save-model, saved its model)."""
-    ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")
+    ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")  # flags that change no result
     try:
         with open(os.path.join(output_dir, f"result_seeds{seed}.json")) as file:
             result = json.load(file)
@@ -329,8 +316,7 @@ def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
     return entry if same and (os.path.isfile(model) or not args.save_model) else None
 
 
-def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
-    """Write result_seeds<seeds>.json: the seeds in per_seed, their mean and std. Returns its path."""
+def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # result_seeds<seeds>.json: scores, mean, std
     scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
     result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
@@ -342,8 +328,7 @@ def write_result(output_dir: str, args, per_seed: dict, **more) -> str:
     return path
 
 
-def summary_line(args, scores: list, meta: dict) -> str:
-    """Mean ± std over the seeds, and its share of the expert's return that expert_ppo.py recorded in the demos."""
+def summary_line(args, scores: list, meta: dict) -> str:  # mean ± std; its share of the expert's return in the demos
     plural = "s" * (len(scores) > 1)
     line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
     if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
@@ -357,14 +342,12 @@ class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
+def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
 
 
-def check_common_args(args):
-    """Refuse bad values of the flags every method shares, before anything slow happens."""
+def check_common_args(args):  # refuse bad values of the flags every method shares, before anything slow happens
     for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
         value, flag = getattr(args, name, None), f"--{name.replace('_', '-')}"
         require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
@@ -376,8 +359,7 @@ def check_common_args(args):
     require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
 
 
-def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
-    """Indices of the joint velocities in the observation, where the paper adds its noise."""
+def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
     obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
         inside = 0 <= min(override) and max(override) < obs_dim
@@ -390,9 +372,7 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
     return list(range(*known[env_id.split("-")[0]]))
 
 
-class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or those zeroed."""
-
+class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^2) velocity noise each step, or zeros
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
         self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
@@ -404,8 +384,6 @@ class PartialObservation(gym.ObservationWrapper):
 
 
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
-    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
@@ -415,13 +393,12 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     if frame_skip is None or frame_skip == native:
         return env
     require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # same time
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
 
-def load_demos(args, env: gym.Env) -> tuple:
-    """(demos, meta): the arrays of --demos, or of the file `expert_ppo.py --make-demos` wrote, checked against env."""
+def load_demos(args, env: gym.Env) -> tuple:  # (demos, meta) of --demos or `expert_ppo.py --make-demos`, checked
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
     n, rate = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000), args.frame_skip
@@ -470,31 +447,25 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
-    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
+    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())  # / Var(a): near 0, a shortcut; near 2, none
 
 
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: velocity noise drawn once per sample, or those entries zeroed."""
-    observed = observations.copy()
-    if hide:
-        observed[:, dims] = 0.0
-    else:
-        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    observed = observations.copy()  # as the sensor saw them: velocity noise drawn once per sample, or zeros
+    noise = 0.0 if hide else np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    observed[:, dims] = 0.0 if hide else observed[:, dims] + noise
     return observed
 
 
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
-    index = np.arange(len(observations))
-    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    index = np.arange(len(observations))  # row t: [o_{t-H+1}, ..., o_t], oldest first
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))  # before it, repeat its first frame
     frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
     return np.concatenate(frames, axis=1)
 
 
-def member_summary(per_seed: dict) -> dict:
-    """{member: {mean, std}} of each member's scores over the seeds."""
+def member_summary(per_seed: dict) -> dict:  # {member: {mean, std}} of each member's scores over the seeds
     members = next(iter(per_seed.values()))["members"]
     scores = {member: [entry["members"][member]["score"] for entry in per_seed.values()] for member in members}
     return {member: {"mean": float(np.mean(values)), "std": float(np.std(values))} for member, values in scores.items()}

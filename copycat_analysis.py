@@ -90,8 +90,7 @@ class UsageError(Exception):
 
 
 # Copied from bc_oh.velocity_dims
-def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
-    """Indices of the joint velocities in the observation, where the paper adds its noise."""
+def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
     obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
         inside = 0 <= min(override) and max(override) < obs_dim
@@ -105,9 +104,7 @@ def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:
 
 
 # Copied from bc_oh.PartialObservation
-class PartialObservation(gym.ObservationWrapper):
-    """The policy's sensor: fresh N(0, std^2) noise on the velocity entries of every observation, or those zeroed."""
-
+class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^2) velocity noise each step, or zeros
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
         self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
@@ -120,8 +117,6 @@ class PartialObservation(gym.ObservationWrapper):
 
 # Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
-    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
@@ -131,9 +126,9 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     if frame_skip is None or frame_skip == native:
         return env
     require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # same time
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
 
 # ----------------------------------------------------------------------------------------------
@@ -221,15 +216,13 @@ def write_atomically(path: str, write):
 
 
 # Copied from bc_oh.require
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
+def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
 
 
 # Copied from bc_oh.load_demos
-def load_demos(args, env: gym.Env) -> tuple:
-    """(demos, meta): the arrays of --demos, or of the file `expert_ppo.py --make-demos` wrote, checked against env."""
+def load_demos(args, env: gym.Env) -> tuple:  # (demos, meta) of --demos or `expert_ppo.py --make-demos`, checked
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
     n, rate = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000), args.frame_skip
@@ -279,9 +272,8 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 # Copied from bc_oh.copy_error
 def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    """MSE(a_{t-1}, a_t) / Var(a) within episodes, mean over action dims: near 0, a copycat shortcut; near 2, none."""
-    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())
+    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
+    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())  # / Var(a): near 0, a shortcut; near 2, none
 
 
 def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
@@ -304,20 +296,16 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
 
 # Copied from bc_oh.partially_observe
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The demos as the policy's sensor saw them: velocity noise drawn once per sample, or those entries zeroed."""
-    observed = observations.copy()
-    if hide:
-        observed[:, dims] = 0.0
-    else:
-        observed[:, dims] += np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    observed = observations.copy()  # as the sensor saw them: velocity noise drawn once per sample, or zeros
+    noise = 0.0 if hide else np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
+    observed[:, dims] = 0.0 if hide else observed[:, dims] + noise
     return observed
 
 
 # Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t = [o_{t-H+1}, ..., o_t] (oldest first); before an episode's first frame, repeat that frame."""
-    index = np.arange(len(observations))
-    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    index = np.arange(len(observations))  # row t: [o_{t-H+1}, ..., o_t], oldest first
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))  # before it, repeat its first frame
     frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
     return np.concatenate(frames, axis=1)
 
@@ -333,9 +321,7 @@ def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's
 
 
 # Copied from bc_oh.Normalizer
-class Normalizer(nn.Module):
-    """Standardises inputs with statistics of the training demos, stored with the model."""
-
+class Normalizer(nn.Module):  # standardises inputs with statistics of the training demos, stored with the model
     def __init__(self, inputs: torch.Tensor):
         super().__init__()
         self.register_buffer("mean", inputs.mean(0))
@@ -346,9 +332,7 @@ class Normalizer(nn.Module):
 
 
 # Copied from bc_so.Policy with Policy->SOPolicy
-class SOPolicy(nn.Module):
-    """BC-SO: only the current frame o_t, the last obs_dim entries of the stacked history, into one MLP."""
-
+class SOPolicy(nn.Module):  # BC-SO: only o_t, the last obs_dim entries of the history, into one MLP
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs[:, -obs_dim:])
@@ -359,9 +343,7 @@ class SOPolicy(nn.Module):
 
 
 # Copied from bc_oh.Policy with Policy->OHPolicy
-class OHPolicy(nn.Module):
-    """BC-OH: the whole history, flattened, into one MLP."""
-
+class OHPolicy(nn.Module):  # BC-OH: the whole history, flattened, into one MLP
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
@@ -372,11 +354,7 @@ class OHPolicy(nn.Module):
 
 
 # Copied from c2f.Table3Policy with Table3Policy->C2FPolicy
-class C2FPolicy(nn.Module):
-    """Policy with the Table 3 flags of args open. At PAPER_FLAGS it builds the same layers in the same order (the
-    same seed gives the same weights) and outputs. penultimate: BC-OH's two-hidden-layer MLP with sg(zeta) joined
-    before its last layer; --no-coarse-action feeds zeros instead of sg(zeta)."""
-
+class C2FPolicy(nn.Module):  # Policy with the flags open: at PAPER_FLAGS the same layers in the same order, outputs
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
         self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args
@@ -388,7 +366,7 @@ class C2FPolicy(nn.Module):
         self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
         if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
-        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, its last linear layer is the head
+        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, sg(zeta) joined before its last (the head)
             self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
         else:
             layers = [nn.Linear(hidden + middle, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
@@ -396,8 +374,7 @@ class C2FPolicy(nn.Module):
         width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
         self.head = nn.Linear(width + fed * (fusion in ("late", "penultimate", "output")), act_dim)
 
-    def pick(self, x, which: str):
-        """The normalised history itself, or its last frame o_t."""
+    def pick(self, x, which: str):  # the normalised history itself, or its last frame o_t
         return x if which == "history" else x[:, -self.obs_dim :]
 
     def coarse_model(self, obs_history):

@@ -111,16 +111,13 @@ class UsageError(Exception):
 
 
 # Copied from bc_oh.require
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError carrying message unless condition holds."""
+def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
 
 
 # Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
-    """gym.make, refusing unknown ids and discrete actions. A frame_skip other than the env's own K0 stretches the
-    time limit by K0 / frame_skip and scales rewards by frame_skip / K0: episodes keep their length and scale."""
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
@@ -130,9 +127,9 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     if frame_skip is None or frame_skip == native:
         return env
     require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # same time
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
 
 def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[int]:
