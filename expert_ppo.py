@@ -127,7 +127,7 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     if frame_skip is None or frame_skip == native:
         return env
     require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # same time
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # the same time
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 

@@ -337,7 +337,7 @@ def job_eta(args, seed: int, start: float, done: float) -> str:  # whole job: th
 
 def start_worker():  # a pool worker: Ctrl-C is the main process's, and each printed line is one write
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # not unbuffered: print writes "\n" apart
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, print's "\n" is a write apart
 
 
 def run_name(args) -> str:  # METHOD, then each flag changed from its default that changes results (c2f__fusion-early)
@@ -442,7 +442,7 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     if frame_skip is None or frame_skip == native:
         return env
     require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # same time
+    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # the same time
     env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
@@ -501,9 +501,8 @@ def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
 
 
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    observed = observations.copy()  # as the sensor saw them: velocity noise drawn once per sample, or zeros
-    noise = 0.0 if hide else np.random.default_rng(seed).normal(0.0, std, (len(observed), len(dims)))
-    observed[:, dims] = 0.0 if hide else observed[:, dims] + noise
+    observed, rng = observations.copy(), np.random.default_rng(seed)  # the sensor's view: noise drawn once per sample
+    observed[:, dims] = 0.0 if hide else observed[:, dims] + rng.normal(0.0, std, (len(observed), len(dims)))
     return observed
 
 

@@ -11,14 +11,14 @@ from conftest import REPO_ROOT
 FILES = [f"{name}.py" for name in file_sizes.TARGETS] + ["expert_ppo.py"]
 """the method files and the expert: what users copy"""
 CEILINGS = {
-    "bc_oh": 430,
-    "bc_so": 432,
-    "history_dropout": 440,
-    "c2f": 534,
-    "fca": 516,
-    "keyframe": 528,
-    "average_ensemble": 485,
-    "dagger": 560,
+    "bc_oh": 429,
+    "bc_so": 431,
+    "history_dropout": 439,
+    "c2f": 533,
+    "fca": 515,
+    "keyframe": 527,
+    "average_ensemble": 484,
+    "dagger": 559,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
