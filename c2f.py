@@ -184,7 +184,7 @@ PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current"
 PAPER_FLAGS.update(stop_gradient=True, coarse_action=True)  # the model flags of Args (--two-stage is training's)
 
 
-class Table3Policy(nn.Module):  # Policy with the flags open: at PAPER_FLAGS the same layers in the same order, outputs
+class Table3Policy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the same layers, order, weights and outputs
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
         self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args

@@ -353,7 +353,7 @@ class OHPolicy(nn.Module):  # BC-OH: the whole history, flattened, into one MLP
 
 
 # Copied from c2f.Table3Policy with Table3Policy->C2FPolicy
-class C2FPolicy(nn.Module):  # Policy with the flags open: at PAPER_FLAGS the same layers in the same order, outputs
+class C2FPolicy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the same layers, order, weights and outputs
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
         self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args
