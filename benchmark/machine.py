@@ -5,9 +5,9 @@
     describe(record)     # 'AuthenticAMD AMD EPYC, AVX512, glibc 2.36, MKL_CBWR=COMPATIBLE'
 
 The keys of expert_ppo.machine() (cpu, cpu_capability, MKL_CBWR, MKL_ENABLE_INSTRUCTIONS, torch, numpy, mujoco,
-gymnasium) keep their meaning; cpu_vendor, fma_avx2, GLIBC_TUNABLES, libc, os and python are added. The same
-command with the same record gives the same digits; which differences between records change which digits is
-measured by benchmark/fingerprint.py.
+gymnasium) keep their meaning; cpu_vendor, cpu_family, cpu_model, fma_avx2, GLIBC_TUNABLES, libc, os and python are
+added. The same command with the same record gives the same digits; which differences between records change which
+digits is measured by benchmark/fingerprint.py.
 """
 import os
 import platform
@@ -58,6 +58,8 @@ def machine() -> dict:
     return {
         "cpu": cpuinfo_field("model name") or platform.processor(),
         "cpu_vendor": cpuinfo_field("vendor_id") or platform.machine(),
+        "cpu_family": cpuinfo_field("cpu family"),  # tells CPUs of one model name apart: AMD EPYC 25 is Zen 4, 26 Zen 5
+        "cpu_model": cpuinfo_field("model"),
         "cpu_capability": torch.backends.cpu.get_cpu_capability(),
         **{name: os.environ.get(name) for name in MKL_VARIABLES},
         "fma_avx2": LIBM_FMA_FLAGS <= flags if (flags := cpu_flags()) else None,  # None: the flags are unknown

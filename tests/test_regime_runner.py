@@ -7,7 +7,7 @@ import subprocess
 import pytest
 from conftest import REPO_ROOT
 
-from benchmark import aggregate, regimes, run_grid
+from benchmark import aggregate, machine, regimes, run_grid
 from benchmark.paper import VARIANTS, as_flags, paper_settings, setting_differences
 from benchmark.results import UsageError, make_result, write_text
 
@@ -152,6 +152,9 @@ def test_a_grid_log_names_no_machine_path_and_records_the_machine(tmp_path):
     shown = run_grid.shown_command(["/usr/bin/python3", "c2f.py", "--output-dir", str(results), "--demos", str(tmp_path / "d.npz")])
     assert shown == ["c2f.py", "--output-dir", "results/x/c2f/Hopper-v4", "--demos", str(tmp_path / "d.npz")]
     record = run_grid.machine()  # benchmark.machine's record: the method files no longer write one
-    assert set(record) == {"cpu", "cpu_vendor", "cpu_capability", "MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "fma_avx2", "GLIBC_TUNABLES", "libc", "os", "python",
+    assert set(record) == {"cpu", "cpu_vendor", "cpu_family", "cpu_model", "cpu_capability", "MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS", "fma_avx2", "GLIBC_TUNABLES", "libc", "os", "python",
                            "torch", "numpy", "mujoco", "gymnasium"}
     assert record["torch"] == __import__("torch").__version__ and record["python"] == platform.python_version()
+    assert (record["cpu_family"], record["cpu_model"]) == (machine.cpuinfo_field("cpu family"), machine.cpuinfo_field("model"))
+    zen5 = "vendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\nmodel name\t: AMD EPYC\n"  # one model name, two kinds
+    assert [machine.cpuinfo_field(key, zen5) for key in ("cpu family", "model", "model name")] == ["26", "2", "AMD EPYC"]
