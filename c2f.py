@@ -1,11 +1,9 @@
 # Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Tables 2 and 3); see README.md
 """C2F: a coarse MLP on o_t gives an action zeta; a policy MLP on [o_{t-H+1}, ..., o_t] and sg(zeta) refines it.
 
-Copying zeta is a simpler shortcut than inferring and copying a_{t-1}, so the policy refines the coarse action
-instead of becoming a copycat. The flags at the end of Args are the ablations of the paper's Table 3.
+Copying zeta is a simpler shortcut than inferring and copying a_{t-1}, so the policy refines it, not copycats.
 
-    python c2f.py --env Hopper-v4
-    python c2f.py --env Hopper-v4 --fusion early --no-stop-gradient   # ablations
+    python c2f.py --env Hopper-v4   # Table 3's ablations: Args' last flags, e.g. --fusion early --no-stop-gradient
 """
 
 import json
@@ -105,10 +103,8 @@ class Normalizer(nn.Module):  # standardises inputs with statistics of the train
 class Policy(nn.Module):  # C2F as the paper draws it (section 8.3, Fig. 10); Table3Policy below has the ablations
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
-        self.normalize = Normalizer(inputs)
-        self.obs_dim = obs_dim
-        self.coarse = mlp(obs_dim, act_dim, hidden)  # pi_phi(o_t) = zeta
-        # pi_theta's three hidden layers on the history, in two parts only so that --fusion middle can join between them
+        self.normalize, self.obs_dim = Normalizer(inputs), obs_dim
+        self.coarse = mlp(obs_dim, act_dim, hidden)  # pi_phi(o_t) = zeta; then pi_theta, split for --fusion middle
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
         self.head = nn.Linear(hidden + act_dim, act_dim)  # the one more fully-connected layer, on [feature, sg(zeta)]
@@ -144,42 +140,29 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    if args.two_stage:  # Table 3's two-stage training: first the coarse model alone, then frozen
-        train_coarse_alone(args, policy, inputs, targets, seed, device)
-    optimizer = torch.optim.Adam([p for p in policy.parameters() if p.requires_grad], lr=args.learning_rate)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
+    loss_name = "coarse" if args.two_stage else "Eq. 2" if args.coarse_action else "final"  # the loss train_step takes
 
-    def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t) (--two-stage: the final loss)
-        zeta, action = policy.coarse_and_final(inputs[idx])
-        loss = ((action - targets[idx]) ** 2).mean()
-        if not args.two_stage and args.coarse_action:
-            loss = loss + ((zeta - targets[idx]) ** 2).mean()
+    def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t), or on one of its two terms
+        zeta, final = policy.coarse_and_final(inputs[idx])
+        final_loss, coarse_loss = ((final - targets[idx]) ** 2).mean(), ((zeta - targets[idx]) ** 2).mean()
+        loss = {"Eq. 2": final_loss + coarse_loss, "final": final_loss, "coarse": coarse_loss}[loss_name]
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return loss
 
+    if args.two_stage:  # Table 3's two-stage training: first the coarse model alone on its loss, then frozen
+        print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
+        fit(args, policy, optimizer, train_step, len(inputs), seed, device, evaluate_policy=False)
+        policy.coarse.requires_grad_(False)  # one Adam for both stages: it steps only the parameters with a gradient
+        loss_name = "final"
+        print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
     return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
 
 
-def train_coarse_alone(args, policy: Policy, inputs: torch.Tensor, targets: torch.Tensor, seed: int, device):
-    optimizer = torch.optim.Adam(policy.coarse.parameters(), lr=args.learning_rate)
-
-    def coarse_step(idx):
-        loss = ((policy.coarse_model(inputs[idx])[0] - targets[idx]) ** 2).mean()
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        return loss
-
-    print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
-    fit(args, policy, optimizer, coarse_step, len(inputs), seed, device, evaluate_policy=False)
-    policy.coarse.requires_grad_(False)
-    print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
-
-
 # ---- Table 3's ablations, and the capacity control: each flag changes only what it names ----
-
 PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history")
 PAPER_FLAGS.update(stop_gradient=True, coarse_action=True)  # the model flags of Args (--two-stage is training's)
 
@@ -187,28 +170,20 @@ PAPER_FLAGS.update(stop_gradient=True, coarse_action=True)  # the model flags of
 class Table3Policy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the same layers, order, weights and outputs
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
-        self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args
-        hidden, fusion = args.hidden, args.fusion
-        self.coarse = mlp(obs_dim * (args.history if args.coarse_input == "history" else 1), act_dim, hidden)
+        frames = {"history": args.history, "current": 1}  # each model reads the whole history, or its last frame o_t
+        self.normalize, self.args, hidden, fusion = Normalizer(inputs), args, args.hidden, args.fusion
+        self.coarse_width, self.policy_width = obs_dim * frames[args.coarse_input], obs_dim * frames[args.policy_input]
+        self.coarse = mlp(self.coarse_width, act_dim, hidden)
         fed = hidden if args.coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        early, middle = fed * (fusion == "early"), fed * (fusion == "middle")
-        policy_in = obs_dim * (args.history if args.policy_input == "history" else 1) + early
-        self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
-        if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
-            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
-        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, sg(zeta) joined before its last (the head)
-            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
-        else:
-            layers = [nn.Linear(hidden + middle, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
-            self.policy_rest = nn.Sequential(*layers)
-        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
+        self.policy_first = nn.Sequential(nn.Linear(self.policy_width + fed * (fusion == "early"), hidden), nn.ReLU())
+        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on (output: no last ReLU)
+        self.policy_rest = nn.Sequential(nn.Linear(hidden + fed * (fusion == "middle"), hidden), nn.ReLU())
+        if fusion != "penultimate":  # penultimate: BC-OH's MLP, sg(zeta) joined before its last layer (the head)
+            self.policy_rest.extend([nn.Linear(hidden, width)] + [nn.ReLU()] * (fusion != "output"))
         self.head = nn.Linear(width + fed * (fusion in ("late", "penultimate", "output")), act_dim)
 
-    def pick(self, x, which: str):  # the normalised history itself, or its last frame o_t
-        return x if which == "history" else x[:, -self.obs_dim :]
-
     def coarse_model(self, obs_history):
-        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.args.coarse_input))
+        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
         return self.coarse[-1](feature), feature
 
     def coarse_and_final(self, obs_history):
@@ -216,10 +191,10 @@ class Table3Policy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the
         fed = feature if args.coarse_output == "feature" else zeta
         fed = fed.detach() if args.stop_gradient else fed
         fed = fed if args.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if args.fusion == stage else h  # noqa: E731
-        h = self.policy_first(join(self.pick(self.normalize(obs_history), args.policy_input), "early"))
+        join = lambda h, *stages: torch.cat([h, fed], dim=1) if args.fusion in stages else h  # noqa: E731
+        h = self.policy_first(join(self.normalize(obs_history)[:, -self.policy_width :], "early"))
         h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))
+        return zeta, self.head(join(h, "late", "penultimate", "output"))
 
     def forward(self, obs_history):
         return self.coarse_and_final(obs_history)[1]

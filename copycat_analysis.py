@@ -356,28 +356,20 @@ class OHPolicy(nn.Module):  # BC-OH: the whole history, flattened, into one MLP
 class C2FPolicy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the same layers, order, weights and outputs
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()
-        self.normalize, self.obs_dim, self.args = Normalizer(inputs), obs_dim, args
-        hidden, fusion = args.hidden, args.fusion
-        self.coarse = mlp(obs_dim * (args.history if args.coarse_input == "history" else 1), act_dim, hidden)
+        frames = {"history": args.history, "current": 1}  # each model reads the whole history, or its last frame o_t
+        self.normalize, self.args, hidden, fusion = Normalizer(inputs), args, args.hidden, args.fusion
+        self.coarse_width, self.policy_width = obs_dim * frames[args.coarse_input], obs_dim * frames[args.policy_input]
+        self.coarse = mlp(self.coarse_width, act_dim, hidden)
         fed = hidden if args.coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        early, middle = fed * (fusion == "early"), fed * (fusion == "middle")
-        policy_in = obs_dim * (args.history if args.policy_input == "history" else 1) + early
-        self.policy_first = nn.Sequential(nn.Linear(policy_in, hidden), nn.ReLU())
-        if fusion == "output":  # the policy MLP's third layer outputs an action-sized vector, no activation
-            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, act_dim))
-        elif fusion == "penultimate":  # BC-OH's MLP: two hidden layers, sg(zeta) joined before its last (the head)
-            self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU())
-        else:
-            layers = [nn.Linear(hidden + middle, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
-            self.policy_rest = nn.Sequential(*layers)
-        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on
+        self.policy_first = nn.Sequential(nn.Linear(self.policy_width + fed * (fusion == "early"), hidden), nn.ReLU())
+        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on (output: no last ReLU)
+        self.policy_rest = nn.Sequential(nn.Linear(hidden + fed * (fusion == "middle"), hidden), nn.ReLU())
+        if fusion != "penultimate":  # penultimate: BC-OH's MLP, sg(zeta) joined before its last layer (the head)
+            self.policy_rest.extend([nn.Linear(hidden, width)] + [nn.ReLU()] * (fusion != "output"))
         self.head = nn.Linear(width + fed * (fusion in ("late", "penultimate", "output")), act_dim)
 
-    def pick(self, x, which: str):  # the normalised history itself, or its last frame o_t
-        return x if which == "history" else x[:, -self.obs_dim :]
-
     def coarse_model(self, obs_history):
-        feature = self.coarse[:-1](self.pick(self.normalize(obs_history), self.args.coarse_input))
+        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
         return self.coarse[-1](feature), feature
 
     def coarse_and_final(self, obs_history):
@@ -385,10 +377,10 @@ class C2FPolicy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the sa
         fed = feature if args.coarse_output == "feature" else zeta
         fed = fed.detach() if args.stop_gradient else fed
         fed = fed if args.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, stage: torch.cat([h, fed], dim=1) if args.fusion == stage else h  # noqa: E731
-        h = self.policy_first(join(self.pick(self.normalize(obs_history), args.policy_input), "early"))
+        join = lambda h, *stages: torch.cat([h, fed], dim=1) if args.fusion in stages else h  # noqa: E731
+        h = self.policy_first(join(self.normalize(obs_history)[:, -self.policy_width :], "early"))
         h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(join(join(h, "late"), "penultimate"), "output"))
+        return zeta, self.head(join(h, "late", "penultimate", "output"))
 
     def forward(self, obs_history):
         return self.coarse_and_final(obs_history)[1]
