@@ -1,12 +1,7 @@
 # KeyFrame: keyframe-focused imitation (Wen et al. 2021; paper Table 2 baseline); see README.md
-"""KeyFrame: BC-OH whose loss is weighted up on the samples where the expert's action is hard to
-predict from its own previous actions: the changepoints that a copycat policy gets wrong.
+"""KeyFrame: BC-OH whose loss is weighted up on the keyframes, where an action-prediction model errs most.
 
-First an action-prediction model (MLP, one hidden layer of 300, LeakyReLU 0.2) learns a_t from the K
-previous actions a_{t-Ks}, ..., a_{t-s} (s = --keyframe-spacing) on the demos; its squared error on each
-sample is APE_t. Then BC-OH trains with per-sample loss weights: --keyframe-weight on the top
---keyframe-fraction of APE (the keyframes), 1 elsewhere; or, with --weighting softmax, the batch's
-softmax of APE / --keyframe-temperature.
+Keyframes are the samples whose a_t the K previous actions predict worst: the changepoints a copycat policy misses.
 
     python keyframe.py --env Hopper-v4
 """
@@ -71,19 +66,15 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     keyframe_k: int = 4
-    """K, how many previous actions the action-prediction model sees (CARLA: 9; not published for MuJoCo.
-    4 consecutive actions, 32 ms of Hopper, are enough to extrapolate a smooth action, so the error is
-    left where the action really changes)"""
+    """K, how many previous actions the action-prediction model sees (CARLA: 9; ours for MuJoCo: 4)"""
     keyframe_spacing: int = 1
-    """frames between those actions: a_{t-K*s}, ..., a_{t-2s}, a_{t-s} (CARLA: 3; MuJoCo default 1, as a
-    MuJoCo control step, 8 ms for Hopper, is much shorter than a gait cycle)"""
+    """frames between those actions: a_{t-K*s}, ..., a_{t-2s}, a_{t-s} (CARLA: 3; ours for MuJoCo: 1)"""
     keyframe_fraction: float = 0.1
     """fraction of the samples, those of highest APE, that are keyframes, in (0, 1] (the authors' 10%)"""
     keyframe_weight: float = 5.0
     """loss weight of a keyframe in --weighting threshold; other samples weigh 1 (the authors' 5)"""
     weighting: Literal["threshold", "softmax"] = "threshold"
-    """threshold: --keyframe-weight on the keyframes, 1 elsewhere; softmax: per batch, the softmax of
-    APE / --keyframe-temperature times the batch size (so the weights average 1)"""
+    """threshold: --keyframe-weight on the keyframes; softmax: batch size x the batch's softmax of APE / temperature"""
     keyframe_temperature: float = 1.0
     """temperature of --weighting softmax"""
     keyframe_model_epochs: int = 20
@@ -93,8 +84,7 @@ class Args:
         fraction = self.keyframe_fraction
         require(0 < fraction <= 1, f"--keyframe-fraction must lie in (0, 1], got {fraction}: the share weighted up")
         for name in "keyframe_k keyframe_spacing keyframe_weight keyframe_temperature keyframe_model_epochs".split():
-            value = getattr(self, name)
-            require(value > 0, f"--{name.replace('_', '-')} must be positive, got {value}")
+            require(getattr(self, name) > 0, f"--{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
 
 
 # ---- The method: BC-OH whose loss weights come from an action-prediction model's error ----
@@ -130,56 +120,42 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
     return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
 
 
-def previous_actions(actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int) -> np.ndarray:
-    """Row t = [a_{t-K*s}, ..., a_{t-2s}, a_{t-s}] (oldest first). Actions before the episode's first are
-    filled with that first action, the earliest available one (at the start itself, a_t)."""
+def previous_actions(actions, episode_starts, k: int, spacing: int) -> np.ndarray:  # row t: [a_{t-Ks}, ..., a_{t-s}]
     frames = stack_history(actions, episode_starts, k * spacing + 1).reshape(len(actions), k * spacing + 1, -1)
-    return frames[:, 0 : k * spacing : spacing].reshape(len(actions), -1)
+    return frames[:, 0 : k * spacing : spacing].reshape(len(actions), -1)  # before an episode: its first action
 
 
-def action_prediction_errors(
-    actions: np.ndarray, episode_starts: np.ndarray, k: int, spacing: int, epochs: int, batch_size: int, device
-) -> torch.Tensor:
-    """Train the action-prediction model (previous K actions -> a_t) on the demos, once; return its
-    squared error ||prediction - a_t||^2 on every sample, APE_t. Seeded by the caller's torch.manual_seed."""
+def action_prediction_errors(actions, episode_starts, k: int, spacing: int, epochs: int, batch_size: int, device):
+    """APE_t = ||f(previous K actions) - a_t||^2 of a model f trained once on the demos (the caller seeds torch)."""
     inputs = torch.as_tensor(previous_actions(actions, episode_starts, k, spacing), dtype=torch.float32, device=device)
     targets = torch.as_tensor(actions, dtype=torch.float32, device=device)
-    layers = [nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])]
-    model = nn.Sequential(*layers).to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    model = nn.Sequential(nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1]))
+    optimizer = torch.optim.Adam(model.to(device).parameters(), lr=1e-3)
     for _ in range(epochs * max(1, len(inputs) // batch_size)):
         idx = torch.randint(len(inputs), (batch_size,), device=device)
-        loss = ((model(inputs[idx]) - targets[idx]) ** 2).mean()
         optimizer.zero_grad()
-        loss.backward()
+        ((model(inputs[idx]) - targets[idx]) ** 2).mean().backward()
         optimizer.step()
-    with torch.no_grad():
-        return ((model(inputs) - targets) ** 2).sum(1)
+    return ((model(inputs) - targets) ** 2).sum(1).detach()
 
 
-def keyframes(ape: torch.Tensor, fraction: float) -> torch.Tensor:
-    """The keyframes, as a mask: the round(fraction * N) samples of highest APE (at least one)."""
-    mask = torch.zeros_like(ape, dtype=torch.bool)
-    mask[torch.topk(ape, max(1, round(fraction * len(ape)))).indices] = True
-    return mask
+def keyframes(ape: torch.Tensor, fraction: float) -> torch.Tensor:  # mask of the round(fraction * N) highest APE, >= 1
+    top = torch.topk(ape, max(1, round(fraction * len(ape)))).indices
+    return torch.zeros_like(ape, dtype=torch.bool).index_fill_(0, top, True)
 
 
-def keyframe_weights(ape: torch.Tensor, fraction: float, weight: float) -> torch.Tensor:
-    """Threshold weighting: `weight` on the keyframes, 1 on the other samples."""
-    return torch.where(keyframes(ape, fraction), weight, 1.0)
+def keyframe_weights(ape: torch.Tensor, fraction: float, weight: float) -> torch.Tensor:  # threshold weighting
+    return torch.where(keyframes(ape, fraction), weight, 1.0)  # `weight` on the keyframes, 1 on the other samples
 
 
-def softmax_weights(ape: torch.Tensor, temperature: float) -> torch.Tensor:
-    """Softmax weighting of one batch: softmax(APE / T) over the batch, times its size (mean weight 1)."""
+def softmax_weights(ape: torch.Tensor, temperature: float) -> torch.Tensor:  # of one batch, so the mean weight is 1
     return torch.softmax(ape / temperature, dim=0) * len(ape)
 
 
 def changepoints(actions: np.ndarray, episode_starts: np.ndarray, fraction: float = 0.1) -> np.ndarray:
-    """Action changepoints: the top `fraction` (a decile) of samples by ||a_t - a_{t-1}|| (0 at an episode start)."""
-    jump = np.linalg.norm(actions - previous_actions(actions, episode_starts, 1, 1), axis=1)
-    mask = np.zeros(len(actions), bool)
-    mask[np.argsort(-jump, kind="stable")[: max(1, round(fraction * len(actions)))]] = True
-    return mask
+    jump = np.linalg.norm(actions - previous_actions(actions, episode_starts, 1, 1), axis=1)  # ||a_t - a_{t-1}||
+    top = np.argsort(-jump, kind="stable")[: max(1, round(fraction * len(actions)))]  # the top decile by default
+    return np.isin(np.arange(len(actions)), top)
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations [(epoch, mean return)] and policy
@@ -191,25 +167,19 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
-    k, spacing, model_epochs = args.keyframe_k, args.keyframe_spacing, args.keyframe_model_epochs
-    ape = action_prediction_errors(
-        demos["actions"], demos["episode_starts"], k, spacing, model_epochs, args.batch_size, device
-    )
+    actions, starts, k, spacing = demos["actions"], demos["episode_starts"], args.keyframe_k, args.keyframe_spacing
+    ape = action_prediction_errors(actions, starts, k, spacing, args.keyframe_model_epochs, args.batch_size, device)
     weights = keyframe_weights(ape, args.keyframe_fraction, args.keyframe_weight)
-    is_key = keyframes(ape, args.keyframe_fraction).cpu().numpy()
-    at_change = changepoints(demos["actions"], demos["episode_starts"])
-    print(
-        f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {is_key.sum()} of {len(is_key)} samples, "
-        f"{(is_key & at_change).sum()} of them at action changepoints "
-        f"(top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
-    )
+    is_key, at_change = keyframes(ape, args.keyframe_fraction).cpu().numpy(), changepoints(actions, starts)
+    found = f"{is_key.sum()} of {len(is_key)} samples, {(is_key & at_change).sum()} of them at action changepoints"
+    change = f"(top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
+    print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {found} {change}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
-        error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)  # per sample, then weighted
         weight = weights[idx] if args.weighting == "threshold" else softmax_weights(ape[idx], args.keyframe_temperature)
-        loss = (weight * error).mean()
+        loss = (weight * ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)).mean()  # per-sample MSE, weighted
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()

@@ -14,9 +14,9 @@ CEILINGS = {
     "bc_oh": 429,
     "bc_so": 431,
     "history_dropout": 439,
-    "c2f": 533,
+    "c2f": 508,
     "fca": 515,
-    "keyframe": 527,
+    "keyframe": 497,
     "average_ensemble": 484,
     "dagger": 559,
 }
