@@ -13,6 +13,7 @@ import signal
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import List, Optional
 
 import gymnasium as gym
@@ -187,6 +188,7 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
     torch.set_num_threads(1)  # small networks gain nothing from more threads, and runs can share a machine
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
+    os.makedirs(output_dir, exist_ok=True)
     per_seed = {seed: finished_seed(output_dir, seed, args) for seed in args.seeds}
     kept, to_train = [s for s in args.seeds if per_seed[s]], [s for s in args.seeds if not per_seed[s]]
     if kept:
@@ -224,7 +226,6 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
         model = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"]}
         model.update(act_dim=result["act_dim"], state_dict=result["policy"].cpu().state_dict())
         path = os.path.join(output_dir, f"seed{seed}.pt")
-        os.makedirs(output_dir, exist_ok=True)
         torch.save(model, f"{path}.tmp")
         os.replace(f"{path}.tmp", path)  # an interrupted run leaves no half-written checkpoint
     write_result(output_dir, args, {seed: entry})  # now: a rerun keeps this seed
@@ -256,8 +257,7 @@ def run_name(args) -> str:  # METHOD, then each flag changed from its default th
 def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
     ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")  # flags that change no result
     try:
-        with open(os.path.join(output_dir, f"result_seeds{seed}.json")) as file:
-            result = json.load(file)
+        result = json.loads(Path(output_dir, f"result_seeds{seed}.json").read_text())
         (entry,) = result["scores"].values()
         recorded = {name: value for name, value in result["args"].items() if name not in ignored}
     except Exception:  # none yet, half written, or not one of ours: train the seed
@@ -272,11 +272,9 @@ def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # resul
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
     result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
     result.update(std=float(np.std(scores)), **more)
-    path = os.path.join(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
-    os.makedirs(output_dir, exist_ok=True)
-    with open(path, "w") as file:  # written plainly: a reader refuses a half-written file
-        json.dump(result, file, indent=1)
-    return path
+    path = Path(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
+    path.write_text(json.dumps(result, indent=1))  # written plainly: a reader refuses a half-written file
+    return str(path)
 
 
 def summary_line(args, scores: list, meta: dict) -> str:  # mean ± std; its share of the expert's return in the demos
@@ -289,8 +287,7 @@ def summary_line(args, scores: list, meta: dict) -> str:  # mean ± std; its sha
     return f"{line}, {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
 
 
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
 
 
 def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
@@ -313,8 +310,7 @@ def check_common_args(args):  # refuse bad values of the flags every method shar
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
     obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        inside = 0 <= min(override) and max(override) < obs_dim
-        require(inside, f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
         return sorted(set(override))
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))

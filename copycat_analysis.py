@@ -81,8 +81,7 @@ class Args:
 
 
 # Copied from bc_oh.UsageError
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
 
 
 # ----------------------------------------------------------------------------------------------
@@ -93,8 +92,7 @@ class UsageError(Exception):
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
     obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
     if override:
-        inside = 0 <= min(override) and max(override) < obs_dim
-        require(inside, f"--velocity-dims must lie in [0, {obs_dim - 1}] for {env_id}")
+        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
         return sorted(set(override))
     if structure:  # v5 envs describe their layout: positions first, then the qvel block
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))

@@ -2,12 +2,14 @@
 
     python scripts/file_sizes.py          # a markdown table
     python scripts/file_sizes.py --page   # also put it between the <!-- sizes --> markers of docs/contributing.md
+    python scripts/file_sizes.py --budget bc_oh   # where one file's formatted lines go, by part (method, run, ...)
 
 Lines = the file's lines once formatted by `ruff format --line-length 120` (so long lines cannot hide size; the
 method files are kept formatted, `tests/test_style.py`), characters likewise; diff = the lines
 `diff -I '^# Copied from' bc_oh.py FILE` marks with < or > (what `diff bc_oh.py FILE` shows a reader, copy markers
 aside). In brackets the targets of issue 31; CLEANRL_CORL gives the anchors' sizes, for comparison.
 """
+import ast
 import re
 import subprocess
 import sys
@@ -27,6 +29,32 @@ TARGETS = {"bc_oh": (400, 18_000, None), "bc_so": (440, None, 20), "history_drop
 """method file -> (most formatted lines, most characters, most diff lines against bc_oh.py); None: no target"""
 ANCHORS = "| CleanRL `ppo_continuous_action.py` (for comparison) | 353 | 14.6k | — |\n| CORL `any_percent_bc.py` | 406 | — | — |\n"
 """the two single-file anchors, measured in their own repositories (../shared/STYLE.md)"""
+
+
+PARTS = {"run": ("run", "train_and_record", "job_eta", "start_worker", "run_name", "finished_seed", "write_result",
+                 "summary_line", "member_summary"),
+         "errors and flag checks": ("UsageError", "require", "check_common_args"), "evaluation": ("evaluate",),
+         "env and partial observability": ("velocity_dims", "PartialObservation", "make_env"),
+         "data": ("load_demos", "copy_error", "partially_observe", "stack_history")}
+"""the parts of a method file by its top-level definitions; `Args` is its own part, and every other definition is the
+method's (network, loss, training step, train_seed, fit; DAgger's expert); the rest (header, imports, banners, copy
+markers, the blank lines between definitions, `__main__`) is counted as such"""
+
+
+def budget(name: str) -> dict:
+    """{part: formatted lines} of a method file, each definition counted from its first line (decorators included)
+    to its last; the parts sum to the file's formatted lines."""
+    text = formatted(name)
+    parts = dict.fromkeys(["Args", "the method", *PARTS, "the rest"], 0)
+    for node in ast.parse(text).body:
+        if not isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            continue
+        part = next((part for part, names in PARTS.items() if node.name in names), None)
+        part = part or ("Args" if node.name == "Args" else "the method")
+        first = min([node.lineno, *(decorator.lineno for decorator in node.decorator_list)])
+        parts[part] += node.end_lineno - first + 1
+    parts["the rest"] += len(text.splitlines()) - sum(parts.values())
+    return parts
 
 
 def formatted(name: str) -> str:
@@ -56,7 +84,12 @@ def table() -> str:
 def main(argv=None):
     parser = OneLineParser(prog="python scripts/file_sizes.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--page", type=Path, nargs="?", const=PAGE, help=f"also put the table between this page's (alone: {PAGE}) {' and '.join(MARKERS)} markers")
+    parser.add_argument("--budget", choices=list(TARGETS), help="print instead where this file's formatted lines go, by part")
     args = parser.parse_args(argv)
+    if args.budget:
+        parts = budget(args.budget)
+        print(f"{args.budget}.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{part} {n}" for part, n in parts.items()))
+        return 0
     if args.page:
         page_parts(args.page, *MARKERS)  # check the markers before anything else
     text = table()

@@ -57,3 +57,20 @@ def test_a_page_without_markers_is_one_line(tmp_path):
     (tmp_path / "page.md").write_text("no markers\n")
     assert_usage_error(run_script("scripts/file_sizes.py", "--page", tmp_path / "page.md"), "needs one <!-- sizes --> line")
     assert_usage_error(run_script("scripts/file_sizes.py", "--page", tmp_path / "missing.md"), "not found")
+
+
+def test_the_budget_gives_each_definitions_lines_to_its_part_and_sums_to_the_file(tmp_path, monkeypatch):
+    source = ('"""doc"""\nimport os\n\n\nclass Args:\n    x = 1\n\n\ndef mlp():\n    return 1\n\n\n@staticmethod\ndef run():\n'
+              "    return 2\n\n\ndef load_demos():\n    return 3\n")
+    (tmp_path / "bc_oh.py").write_text(source)
+    monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
+    assert file_sizes.budget("bc_oh") == {"Args": 2, "the method": 2, "run": 3, "errors and flag checks": 0, "evaluation": 0,
+                                          "env and partial observability": 0, "data": 2, "the rest": 11}
+    assert len(file_sizes.formatted("bc_oh").splitlines()) == 20  # ruff puts a blank line after the docstring
+
+
+def test_the_budget_of_a_real_file_sums_to_its_formatted_lines_and_is_printed_in_one_line(capsys):
+    parts = file_sizes.budget("c2f")
+    assert sum(parts.values()) == len(file_sizes.formatted("c2f").splitlines()) and parts["the method"] > parts["evaluation"] > 0
+    assert file_sizes.main(["--budget", "c2f"]) == 0
+    assert capsys.readouterr().out == f"c2f.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{p} {n}" for p, n in parts.items()) + "\n"
