@@ -1,8 +1,7 @@
 # Average-Ensemble of BC-SO and BC-OH (paper section 5.1 and Table 2); see README.md
 """Average-Ensemble: a BC-SO member (o_t) and a BC-OH member (the history) per seed, acting with their mean action.
 
-BC-SO cannot copy a_{t-1} but misses what the history reveals; BC-OH sees it but copies. Each member trains exactly
-as its own script would for the seed, and all three are evaluated on the same episodes.
+BC-SO cannot copy a_{t-1} but misses what the history reveals; BC-OH sees it but copies: the mean hedges the two.
 
     python average_ensemble.py --env Hopper-v4
 """
@@ -109,29 +108,23 @@ class CurrentFramePolicy(nn.Module):  # BC-SO: only o_t, the last obs_dim entrie
         return self.net(self.normalize(obs_history[:, -self.net[0].in_features :]))  # in_features = obs_dim
 
 
-class AverageEnsemble(nn.Module):
-    """Acts with the mean of its members' actions; every member reads the same history input."""
-
-    def __init__(self, members: dict):
+class AverageEnsemble(nn.Module):  # the members bc_so.py and bc_oh.py train, acting with their mean action
+    def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
-        self.members = nn.ModuleDict(members)
+        seed, self.members = torch.initial_seed(), nn.ModuleDict()  # the seed train_seed gave torch.manual_seed
+        for name, member in (("bc_so", CurrentFramePolicy), ("bc_oh", Policy)):
+            torch.manual_seed(seed)  # each member initialised from it, as its own script does
+            self.members[name] = member(obs_dim, act_dim, history, hidden, inputs)
 
-    def forward(self, obs_history):
+    def forward(self, obs_history):  # every member reads the same history
         return sum(member(obs_history) for member in self.members.values()) / len(self.members)
 
 
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
-    """The members bc_so.py and bc_oh.py train, each initialised from this seed as its own script does."""
-    seed, members = torch.initial_seed(), {}  # the seed train_seed gave torch.manual_seed
-    for name, member in (("bc_so", CurrentFramePolicy), ("bc_oh", Policy)):
-        torch.manual_seed(seed)
-        members[name] = member(obs_dim, act_dim, args.history, args.hidden, inputs)
-    return AverageEnsemble(members)
+    return AverageEnsemble(obs_dim, act_dim, args.history, args.hidden, inputs)
 
 
-def train_seed(args, demos: dict, seed: int, device) -> dict:
-    """Train one seed's members side by side; returns the ensemble's evaluations [(epoch, mean return)],
-    each member's ({name: [(epoch, mean return)]}) and the trained ensemble."""
+def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations [(epoch, mean return)] and policy
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -145,21 +138,17 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
 
     def train_step(idx):  # behavioural cloning: an Adam step on the MSE to the expert's actions of a minibatch
         losses = {name: ((member(inputs[idx]) - targets[idx]) ** 2).mean() for name, member in policy.members.items()}
-        # the loss of both members: disjoint parameters and a per-parameter Adam, so each trains exactly as if alone
-        loss = sum(losses.values())
         optimizer.zero_grad()
-        loss.backward()
+        sum(losses.values()).backward()  # disjoint parameters and a per-parameter Adam: each member trains as if alone
         optimizer.step()
         return losses
 
     evaluations, member_evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
     result = dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
-    return {**result, "member_evaluations": member_evaluations}
+    return {**result, "member_evaluations": member_evaluations}  # and each member's, {name: [(epoch, mean return)]}
 
 
-# (fit is this file's own: it evaluates each member beside the ensemble, on the same episodes, and logs both losses)
-def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device) -> tuple:
-    """Run train_step for --epochs, the rate decayed linearly to 0; returns (evaluations, members', ms/step)."""
+def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device) -> tuple:  # evaluates members too
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     member_evaluations = {name: [] for name in policy.members}
