@@ -1,8 +1,7 @@
 # Fighting Copycat Agents, FCA (Wen et al. 2020; paper Table 2 baseline); see README.md
 """FCA: BC-OH whose history embedding is stripped of what it says about the previous action.
 
-An encoder G embeds the history as e, a head F maps e to a_t, an adversary D predicts a_{t-1} from (e, a_t). In
-turns, D steps on MSE(D(e, a_t), a_{t-1}), then G and F on MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}).
+In turns, adversary D learns a_{t-1} from (e, a_t); encoder G (history -> e) and head F (e -> a_t) fit a_t and foil D.
 
     python fca.py --env Hopper-v4
 """
@@ -56,7 +55,7 @@ class Args:
     learning_rate: Optional[float] = None
     """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 300
-    """width of the hidden layers of G (3), F and D (1 each): the authors' 300"""
+    """width of the hidden layers"""
     eval_every: int = 100
     """evaluate every this many epochs and after the last; the score is the mean of the last 3"""
     eval_episodes: int = 10
@@ -84,6 +83,11 @@ class Args:
 # ---- The method: an encoder, a policy head and an adversary that predicts a_{t-1}, trained in turns ----
 
 
+def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the authors' F and D: one hidden layer
+    layers = [nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out_dim)]
+    return nn.Sequential(*layers)
+
+
 # Copied from bc_oh.Normalizer
 class Normalizer(nn.Module):  # standardises inputs with statistics of the training demos, stored with the model
     def __init__(self, inputs: torch.Tensor):
@@ -95,32 +99,22 @@ class Normalizer(nn.Module):  # standardises inputs with statistics of the train
         return (x - self.mean) / self.std
 
 
-def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the authors' F and D: one hidden layer
-    return nn.Sequential(nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out_dim))
-
-
-def encoder_block(in_dim: int, out_dim: int, bias: bool = True) -> list:  # a hidden layer of the authors' encoder G
-    return [nn.Linear(in_dim, out_dim, bias=bias), nn.BatchNorm1d(out_dim), nn.LeakyReLU(0.2)]
-
-
 def authors_init(module: nn.Module):  # the authors' weights_init: Xavier-uniform Linear weights, BatchNorm N(1, 0.02^2)
     if isinstance(module, nn.Linear):
         nn.init.xavier_uniform_(module.weight)
-        if module.bias is not None:
-            nn.init.zeros_(module.bias)
     elif isinstance(module, nn.BatchNorm1d):
         nn.init.normal_(module.weight, 1.0, 0.02)
+    if isinstance(module, (nn.Linear, nn.BatchNorm1d)) and module.bias is not None:  # and zero biases
         nn.init.zeros_(module.bias)
 
 
-# FCA: the authors' encoder G (history -> e), policy head F(e) -> a_t, and adversary D(e, a_t) -> a_{t-1} for
-# training. G's BatchNorm bounds e's scale: G maximises D's error, and unbounded it inflates e instead.
-class Policy(nn.Module):
+class Policy(nn.Module):  # FCA: the authors' encoder G (history -> e), head F(e) -> a_t, adversary D(e, a_t) -> a_{t-1}
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, embedding_dim: int, inputs: torch.Tensor):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        blocks = encoder_block(obs_dim * history, hidden, bias=False)  # the first Linear without bias, as theirs
-        blocks += encoder_block(hidden, hidden) + encoder_block(hidden, hidden)
+        blocks = []  # G's three hidden layers; BatchNorm bounds e's scale, which G, maximising D's error, would inflate
+        for i, in_dim in enumerate([obs_dim * history, hidden, hidden]):  # the first Linear without bias, as theirs
+            blocks += [nn.Linear(in_dim, hidden, bias=i > 0), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2)]
         self.encoder = nn.Sequential(*blocks, nn.Linear(hidden, embedding_dim))
         self.head = head(embedding_dim, act_dim, hidden)
         self.adversary = head(embedding_dim + act_dim, act_dim, hidden)  # conditioned on the true a_t
@@ -140,36 +134,30 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
     return Policy(obs_dim, act_dim, args.history, args.hidden, args.embedding_dim, inputs)
 
 
-def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:
-    """Row t = a_{t-1}. At an episode start there is none: a_t itself stands in (the history rule of
-    stack_history, first frame repeated), so the adversary has nothing to remove there."""
-    return stack_history(actions, episode_starts, 2)[:, : actions.shape[1]]
+def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:  # row t: a_{t-1}
+    return stack_history(actions, episode_starts, 2)[:, : actions.shape[1]]  # at a start a_t: D has nothing to remove
 
 
-def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> torch.Tensor:
-    """One step of D alone on MSE(D(e, a_t), a_{t-1}), the embedding held fixed (detached); returns that loss."""
-    loss = ((policy.predict_previous_action(embedding.detach(), actions) - previous) ** 2).mean()
+def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> torch.Tensor:  # a step of D; its loss
+    loss = ((policy.predict_previous_action(embedding.detach(), actions) - previous) ** 2).mean()  # e held fixed
     optimizer.zero_grad()
     loss.backward()
     optimizer.step()  # only D has gradients (e is detached), so Adam moves only D
     return loss.detach()
 
 
-def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):
-    """One step of G and F on MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}): fit a_t while making a_{t-1}
-    unpredictable for the current D, which stays as it is. Returns (BC loss, adversary loss)."""
+def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):  # a step of G and F
     bc_loss = ((policy.head(embedding) - actions) ** 2).mean()
     adversary_loss = ((policy.predict_previous_action(embedding, actions) - previous) ** 2).mean()
     optimizer.zero_grad()
-    (bc_loss - weight * adversary_loss).backward()
-    policy.adversary.zero_grad()  # this step moves G and F only
+    (bc_loss - weight * adversary_loss).backward()  # fit a_t while making a_{t-1} unpredictable for the current D
+    policy.adversary.zero_grad()  # which stays as it is: this step moves G and F only
     optimizer.step()
     return bc_loss.detach(), adversary_loss.detach()
 
 
-def authors_setting(env_id: str, weight: Optional[float], lr_ratio: Optional[float]) -> tuple:
-    """(w, D's lr / G's lr): the flags, or the authors' values (their Hopper command: w = 2, D at 4e-4 against 2e-4)."""
-    default = 2.0 if env_id.startswith("Hopper") else 1.0  # the same for w and for the ratio
+def authors_setting(env_id: str, weight: Optional[float], lr_ratio: Optional[float]) -> tuple:  # (w, D's lr ratio)
+    default = 2.0 if env_id.startswith("Hopper") else 1.0  # the authors' w and ratio (Hopper: w = 2, D 4e-4, G 2e-4)
     return default if weight is None else weight, default if lr_ratio is None else lr_ratio
 
 
@@ -204,13 +192,13 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations
     return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
 
 
-# (fit is this file's own: it logs the adversary's mean error)
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True) -> tuple:
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
     for epoch in range(1, args.epochs + 1):
-        epoch_start, adversary_error = time.time(), torch.zeros((), device=device)
+        epoch_start = time.time()
+        adversary_error = torch.zeros((), device=device)  # this file's own fit: it also logs D's mean error
         for _ in range(steps_per_epoch):
             for group in optimizer.param_groups:  # each from its own initial rate, linearly to 0
                 group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - step / total_steps)
