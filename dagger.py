@@ -1,8 +1,7 @@
 # DAgger with the expert online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README.md
 """DAgger: BC-OH on the demos, then rounds of on-policy data labelled by the expert (Ross et al. 2011).
 
-Round 0 is bc_oh.py. Each round then rolls out a beta-mix of expert and learner, labels every visited state with the
-expert's action on the clean observation, aggregates, and trains the learner on (--dagger-samples labels in all).
+Round 0 is bc_oh.py; each round after labels the states a beta-mix visits with the expert's clean-observation action.
 
     python dagger.py --env Hopper-v4
 """
@@ -82,16 +81,6 @@ class Args:
 # ---- The method: BC-OH, then rounds of expert labels on the learner's own states ----
 
 
-def check_dagger_args(args):  # refuse bad DAgger settings, and a missing or wrong expert (queried online), at once
-    for name in ("dagger_rounds", "dagger_epochs", "dagger_beta_rounds"):
-        value = getattr(args, name)
-        require(value is None or value > 0, f"--{name.replace('_', '-')} must be positive, got {value}")
-    samples, rounds = args.dagger_samples, args.dagger_rounds
-    few = f"--dagger-samples {samples} is below one label per round of --dagger-rounds {rounds}"
-    require(samples >= rounds, f"{few}: raise --dagger-samples or lower --dagger-rounds")
-    load_expert(args.expert.format(env=args.env), args.env)  # fails now, not after round 0, if it is none for this env
-
-
 # Copied from bc_oh.mlp..make_policy
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
@@ -122,6 +111,15 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
     return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
 
 
+def check_dagger_args(args):  # refuse bad DAgger settings, and a missing or wrong expert (queried online), at once
+    for name in ("dagger_rounds", "dagger_epochs", "dagger_beta_rounds"):
+        value = getattr(args, name)
+        require(value is None or value > 0, f"--{name.replace('_', '-')} must be positive, got {value}")
+    few = f"--dagger-samples {args.dagger_samples} is below one label per round of --dagger-rounds {args.dagger_rounds}"
+    require(args.dagger_samples >= args.dagger_rounds, f"{few}: raise --dagger-samples or lower --dagger-rounds")
+    load_expert(args.expert.format(env=args.env), args.env)  # fails now, not after round 0, if it is none for this env
+
+
 def split_budget(total: int, rounds: int) -> list:  # labels per round: as even as can be, the first take the rest
     return [total // rounds + (r < total % rounds) for r in range(rounds)]
 
@@ -132,35 +130,28 @@ def dagger_beta(round_number: int, beta_rounds: int) -> float:  # P(the expert a
 
 @torch.no_grad()
 def collect_round(policy: nn.Module, expert: nn.Module, args, num_labels: int, beta: float, rng, device) -> dict:
-    """num_labels steps of the beta-mix (the expert acts with probability beta): the history the learner saw (inputs),
-    the clean observation, the expert's action on it (labels), whether it acted. The noise is added here, visibly."""
+    """num_labels steps of the beta-mix: the learner's noisy histories (inputs), clean observations, expert labels."""
     env = make_env(args.env, args.frame_skip)
-    dims = velocity_dims(env, args.env, args.velocity_dims)
+    dims, low, high = velocity_dims(env, args.env, args.velocity_dims), env.action_space.low, env.action_space.high
     noise = PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, int(rng.integers(2**31)))
-    low, high = env.action_space.low, env.action_space.high
     clean, _ = env.reset(seed=int(rng.integers(2**31)))  # the raw env: noise.observation adds the noise by hand
-    frames, new_episode = None, True
-    record = {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
+    frames, record = None, {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
     for _ in range(num_labels):
         observed = noise.observation(clean)[None]  # the last H frames, an episode's first repeated (as stack_history)
-        frames = np.repeat(observed, args.history, axis=0) if new_episode else np.concatenate([frames[1:], observed])
-        history = frames.reshape(1, -1)
+        frames = np.repeat(observed, args.history, axis=0) if frames is None else np.concatenate([frames[1:], observed])
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         expert_acts = rng.random() < beta
-        learner = policy(torch.as_tensor(history, dtype=torch.float32, device=device))[0].cpu().numpy()
-        action = label if expert_acts else learner.clip(low, high)
-        for key, value in zip(record, (history[0].astype(np.float32), clean, label, expert_acts)):
+        learner = policy(torch.as_tensor(frames.reshape(1, -1), dtype=torch.float32, device=device))[0].cpu().numpy()
+        for key, value in zip(record, (frames.reshape(-1).astype(np.float32), clean, label, expert_acts)):
             record[key].append(value)
-        clean, _, terminated, truncated, _ = env.step(action)
-        new_episode = terminated or truncated
-        if new_episode:
-            clean, _ = env.reset()
+        clean, _, terminated, truncated, _ = env.step(label if expert_acts else learner.clip(low, high))
+        if terminated or truncated:  # a new episode: its history starts afresh
+            clean, frames = env.reset()[0], None
     env.close()
     return {key: np.array(values) for key, values in record.items()}
 
 
 def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations [(epoch, mean return)] and policy
-    # BC-OH, then the DAgger rounds: one optimizer, one minibatch stream, the normaliser of the demos kept throughout
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
@@ -180,64 +171,63 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations
         return loss
 
     expert, rollout_rng = load_expert(args.expert.format(env=args.env), args.env), np.random.default_rng(seed)
-    rounds, collected, generator = [], [], torch.Generator(device=device).manual_seed(seed)
-    epochs, evaluations = args.epochs + args.dagger_rounds * args.dagger_epochs, []
-    progress = dict(epoch=0, epochs=epochs, start=time.time(), train_time=0.0, steps=0, evaluations=evaluations)
-    progress.update(generator=generator)  # one minibatch stream through all rounds
-    for round_number, num_labels in enumerate([0] + split_budget(args.dagger_samples, args.dagger_rounds)):
-        if round_number > 0:  # roll out the beta-mix, label with the expert, aggregate (train_step sees the aggregate)
-            beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
-            policy.eval()
-            data = collect_round(policy, expert, args, num_labels, beta, rollout_rng, device)
-            policy.train()
-            collected.append(data)
-            inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
-            targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
-            expert_fraction = float(data["expert_acted"].mean())
-            rounds.append(dict(round=round_number, beta=beta, labels=num_labels, expert_fraction=expert_fraction))
-            rounds[-1]["aggregate"] = len(inputs)
-        progress["round"] = round_number
-        fit(args, policy, optimizer, train_step, len(inputs), seed, device, progress)
-        if round_number == 0:  # the learner DAgger starts from, scored as bc_oh.py scores it
-            bc_oh_score = float(np.mean([ret for _, ret in evaluations[-3:]]))
+    budget, rounds, collected = split_budget(args.dagger_samples, args.dagger_rounds), [], []
+
+    def aggregate(round_number):  # roll out the beta-mix, label, aggregate (same optimizer, the demos' normaliser)
+        nonlocal inputs, targets  # train_step samples the aggregate from now on
+        beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
+        policy.eval()
+        data = collect_round(policy, expert, args, budget[round_number - 1], beta, rollout_rng, device)
+        policy.train()
+        collected.append(data)
+        inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
+        targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
+        rounds.append(dict(round=round_number, beta=beta, labels=budget[round_number - 1]))
+        rounds[-1].update(expert_fraction=float(data["expert_acted"].mean()), aggregate=len(inputs))
+        return len(inputs)
+
+    evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device, aggregate)
+    round_0 = [ret for epoch, ret in evaluations if epoch <= args.epochs][-3:]  # scored as bc_oh.py scores it
     dagger_data = {key: np.concatenate([data[key] for data in collected]) for key in collected[0]}
-    ms_per_step = 1000 * progress["train_time"] / progress["steps"]
     result = dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
-    return {**result, "bc_oh_score": bc_oh_score, "rounds": rounds, "dagger_data": dagger_data}
+    return {**result, "bc_oh_score": float(np.mean(round_0)), "rounds": rounds, "dagger_data": dagger_data}
 
 
-# (fit is this file's own: one round, its epochs numbered on from the rounds before (evaluation seeds, the log), its
-# minibatches from the one generator of all rounds; the final learner is evaluated three times)
-def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, progress: dict):
-    round_number, evaluations, generator = progress["round"], progress["evaluations"], progress["generator"]
-    epochs = args.dagger_epochs if round_number else args.epochs
+# (fit is this file's own: bc_oh.py's loop run on through the rounds, with one epoch count and one minibatch stream)
+def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, aggregate) -> tuple:
+    ends = [args.epochs + r * args.dagger_epochs for r in range(args.dagger_rounds + 1)]  # each round's last epoch
     steps_per_epoch = num_samples // args.batch_size
-    total_steps, step = epochs * steps_per_epoch, 0  # the learning rate restarts in every round
-    for round_epoch in range(1, epochs + 1):
-        progress["epoch"] += 1
-        epoch, epoch_start = progress["epoch"], time.time()
+    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    generator = torch.Generator(device=device).manual_seed(seed)
+    round_number, round_start, epochs = 0, 0, ends[-1]  # round_start: where the learning rate last restarted
+    for epoch in range(1, epochs + 1):
+        if epoch > ends[round_number]:  # the next round: aggregate, then train on the aggregate
+            round_number, round_start = round_number + 1, step
+            num_samples = aggregate(round_number)
+            steps_per_epoch = num_samples // args.batch_size
+            total_steps = args.dagger_epochs * steps_per_epoch
+        epoch_start = time.time()
         for _ in range(steps_per_epoch):
             for group in optimizer.param_groups:  # each from its own initial rate, linearly to 0
-                group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - step / total_steps)
+                group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - (step - round_start) / total_steps)
             loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
-        progress["train_time"] += time.time() - epoch_start
-        progress["steps"] += steps_per_epoch
-        if epoch % args.eval_every == 0 or round_epoch == epochs:
+        train_time += time.time() - epoch_start
+        evaluating = epoch % args.eval_every == 0 or epoch == ends[round_number]
+        if evaluating:
             policy.eval()
-            final = round_number == args.dagger_rounds and round_epoch == epochs  # the final learner: 3 evaluations
-            for k in range(3 if final else 1):  # on disjoint episodes
+            for k in range(3 if epoch == epochs else 1):  # the final learner: 3 evaluations, on disjoint episodes
                 episodes_seed = 10_000 * seed + epoch + k * args.eval_episodes
                 returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
                 evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if epoch % args.eval_every == 0 or round_epoch == epochs or epoch % max(1, progress["epochs"] // 20) == 0:
+        if evaluating or epoch % max(1, epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            speed = f"{1000 * progress['train_time'] / progress['steps']:.2f} ms/step"
-            eta = job_eta(args, seed, progress["start"], epoch / progress["epochs"])
-            line = f"seed {seed} | round {round_number} | epoch {epoch}/{progress['epochs']} | loss {last_loss:.5f}"
-            print(f"{line} | last eval {last} | {speed} | {eta}", flush=True)
+            line = f"seed {seed} | round {round_number} | epoch {epoch}/{epochs} | loss {last_loss:.5f}"
+            eta = job_eta(args, seed, start, epoch / epochs)
+            print(f"{line} | last eval {last} | {1000 * train_time / step:.2f} ms/step | {eta}", flush=True)
+    return evaluations, 1000 * train_time / step
 
 
 # ---- Evaluation ----
