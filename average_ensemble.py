@@ -68,9 +68,7 @@ class Args:
     """train on the GPU"""
 
 
-# ---- The method: a BC-SO and a BC-OH member, their actions averaged ----
-
-
+# ---- The method: its network, loss and training ----
 # Copied from bc_oh.mlp..Policy
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
@@ -180,8 +178,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 
 # ---- Evaluation ----
-
-
 # Copied from bc_oh.evaluate
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
@@ -205,8 +201,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-
-
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed

@@ -82,9 +82,7 @@ class Args:
     """train the coarse model alone for --epochs and freeze it, then the rest for --epochs on the final loss"""
 
 
-# ---- The method: a coarse model on o_t, a history policy refining sg(zeta), Eq. 2 ----
-
-
+# ---- The method: its network, loss and training ----
 # Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
@@ -230,8 +228,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 
 # ---- Evaluation ----
-
-
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
     env = make_env(args.env, args.frame_skip)
@@ -254,8 +250,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-
-
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed

@@ -78,9 +78,7 @@ class Args:
     """round r executes the expert with probability beta = max(0, 1 - r / this); None: --dagger-rounds"""
 
 
-# ---- The method: BC-OH, then rounds of expert labels on the learner's own states ----
-
-
+# ---- The method: its network, loss and training ----
 # Copied from bc_oh.mlp..make_policy
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
@@ -231,8 +229,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 
 # ---- Evaluation ----
-
-
 # Copied from bc_oh.evaluate
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
@@ -256,8 +252,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-
-
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed

@@ -80,9 +80,7 @@ class Args:
         require(self.embedding_dim > 0, f"--embedding-dim must be positive, got {self.embedding_dim}")
 
 
-# ---- The method: an encoder, a policy head and an adversary that predicts a_{t-1}, trained in turns ----
-
-
+# ---- The method: its network, loss and training ----
 def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the authors' F and D: one hidden layer
     layers = [nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, out_dim)]
     return nn.Sequential(*layers)
@@ -224,8 +222,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 
 # ---- Evaluation ----
-
-
 # Copied from bc_oh.evaluate..stack_history
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
@@ -249,8 +245,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-
-
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed

@@ -74,9 +74,7 @@ class Args:
         require(0 <= self.history_dropout < 1, f"--history-dropout must lie in [0, 1), got {self.history_dropout}")
 
 
-# ---- The method: BC-OH with dropout on the past frames only ----
-
-
+# ---- The method: its network, loss and training ----
 # Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
@@ -161,8 +159,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 
 
 # ---- Evaluation ----
-
-
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
     env = make_env(args.env, args.frame_skip)
@@ -185,8 +181,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-
-
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     check_common_args(args)
     name = run_name(args)  # before the defaults are filled in: it names what the user changed
