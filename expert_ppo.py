@@ -7,9 +7,7 @@ Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts
 Demos:     python expert_ppo.py --env Hopper-v4 --make-demos   (demos/Hopper-v4_20000.npz: the imitation files' input)
 Other rate: python expert_ppo.py --env Hopper-v4 --frame-skip 1   (writes runs/expert_ppo/Hopper-v4__1_fs1)
 
-The checkpoint is a plain dict of tensors and numbers (torch.load(..., weights_only=True) reads it):
-the actor, the frozen observation-normalisation statistics, the action bounds, env id, frame skip, shapes,
-args, step count and evaluated return. The imitation scripts copy `ExpertPolicy` and `load_expert` below.
+A checkpoint is a dict of tensors and numbers (experts/README.md); the imitation files copy ExpertPolicy, load_expert.
 """
 
 import hashlib
@@ -31,11 +29,8 @@ import torch.nn as nn
 import tyro
 
 gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# gymnasium's HalfCheetah XML uses a compiler attribute that MuJoCo 3.x deprecates, so MuJoCo warns (and appends to
-# ./MUJOCO_LOG.TXT) each time that env is made: drop that warning, print the others.
-mujoco.set_mju_user_warning(
-    lambda message: None if "settotalmass" in message else print(f"MuJoCo warning: {message}", file=sys.stderr)
-)
+# MuJoCo 3.x warns of gymnasium's HalfCheetah XML (to ./MUJOCO_LOG.TXT too) each time it is made: drop that one
+mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
 
 
 @dataclass
@@ -106,10 +101,7 @@ class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-# ----------------------------------------------------------------------------------------------
-# Env
-
-
+# ---- Env ----
 # Copied from bc_oh.require
 def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
@@ -132,10 +124,8 @@ def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
 
-def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[int]:
-    """The frame skip of the envs make_env(env_id, frame_skip) makes: frame_skip, or the env's own when None
-    (None for an env that is not MuJoCo). Makes one such env, so that bad input (unknown id, discrete
-    actions, a frame skip the env cannot take) fails here with one line, before any work is done."""
+def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[int]:  # None: not a MuJoCo env
+    """The frame skip of make_env(env_id, frame_skip), from one env made: bad input fails here, before any work."""
     if frame_skip is not None and frame_skip <= 0:  # make_env would divide by it, or make a negative time limit
         raise UsageError(f"--frame-skip must be positive, got {frame_skip}: e.g. 1, or leave it out for the env's own")
     env = make_env(env_id, frame_skip)
@@ -144,9 +134,7 @@ def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[in
     return resolved
 
 
-class RunningMeanStd:
-    """Running mean and variance (parallel algorithm of Chan et al.), as in gymnasium's normalisers."""
-
+class RunningMeanStd:  # running mean and variance (parallel algorithm of Chan et al.), as gymnasium's normalisers
     def __init__(self, shape=()):
         self.mean, self.var, self.count = np.zeros(shape), np.ones(shape), 1e-4
 
@@ -154,21 +142,16 @@ class RunningMeanStd:
         batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
         delta, total = batch_mean - self.mean, self.count + batch_count
         self.mean = self.mean + delta * batch_count / total
-        self.var = (
-            self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total
-        ) / total
+        sum_of_squares = self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total
+        self.var = sum_of_squares / total
         self.count = total
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
         return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
 
 
-# ----------------------------------------------------------------------------------------------
-# Networks
-
-
-def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:
-    """Two tanh hidden layers with orthogonal init (the PPO implementation details of Huang et al.)."""
+# ---- Networks ----
+def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:  # tanh layers, Huang et al.'s init
     layers = [nn.Linear(in_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, out_dim)]
     for layer, std in zip(layers[::2], (np.sqrt(2), np.sqrt(2), last_std)):
         nn.init.orthogonal_(layer.weight, std)
@@ -226,19 +209,14 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     return policy.eval()
 
 
-# ----------------------------------------------------------------------------------------------
-# Checkpoints
-
-
-def machine() -> dict:
-    """Where a result was made: the same command on the same kind of CPU, with these versions, gives the same digits."""
+# ---- Checkpoints ----
+def machine() -> dict:  # where a result was made: the same command, kind of CPU and versions give the same digits
     cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
     cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
     return {
         "cpu": cpu[1] if cpu else platform.processor(),
         "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-        "MKL_CBWR": os.environ.get("MKL_CBWR"),
-        "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+        **{name: os.environ.get(name) for name in ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS")},
         "torch": str(torch.__version__),
         "numpy": np.__version__,
         "mujoco": mujoco.__version__,
@@ -259,46 +237,11 @@ def write_atomically(path: str, write):
             os.remove(tmp)
 
 
-def save_atomically(obj, path: str):
-    """torch.save through write_atomically: an interrupted run never leaves half a checkpoint."""
+def save_atomically(obj, path: str):  # torch.save through write_atomically: never half a checkpoint
     write_atomically(path, lambda file: torch.save(obj, file))
 
 
-def make_checkpoint(args, env, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return=None):
-    def to_tensor(x):
-        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
-
-    return {
-        "format": "copycat-suite/expert-ppo/1",
-        "env_id": args.env,
-        "frame_skip": args.frame_skip,  # the rate the policy was trained at (train resolves None to the env's own)
-        "obs_shape": list(env.single_observation_space.shape),
-        "action_shape": list(env.single_action_space.shape),
-        "hidden": args.hidden,
-        "actor": agent.actor_mean.state_dict(),
-        "obs_mean": to_tensor(obs_rms.mean),
-        "obs_var": to_tensor(obs_rms.var),
-        "action_low": to_tensor(env.single_action_space.low),
-        "action_high": to_tensor(env.single_action_space.high),
-        "args": asdict(args),
-        "global_step": global_step,
-        "eval_return": eval_return,
-        "machine": machine(),  # where it was trained (checkpoints made before this have none)
-        # only needed to resume training:
-        "agent": agent.state_dict(),
-        "optimizer": optimizer.state_dict(),
-        "obs_count": obs_rms.count,
-        "ret_mean": to_tensor(ret_rms.mean),
-        "ret_var": to_tensor(ret_rms.var),
-        "ret_count": ret_rms.count,
-        "best_return": best_return,
-    }
-
-
-# ----------------------------------------------------------------------------------------------
-# Evaluation
-
-
+# ---- Evaluation ----
 def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_skip: Optional[int] = None) -> list:
     """Returns of `episodes` episodes of the deterministic policy, one env, seeds seed, seed+1, ..."""
     env, returns = make_env(env_id, frame_skip), []
@@ -314,10 +257,9 @@ def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_
     return returns
 
 
-def retargeted_expert(path: str, env_id: str):
-    """--retarget: (the expert at path, the env it was made for), refused unless that env is another version of
-    env_id's (Hopper-v4 for Hopper-v5) with the same action shape and the same observation, or one that is the
-    leading positions and velocities of env_id's (Ant-v4's 27 entries of Ant-v5's 105, before its contact forces)."""
+def retargeted_expert(path: str, env_id: str):  # --retarget: (the expert at path, the env it was made for)
+    """Refused unless made for another version of env_id (Hopper-v4 for Hopper-v5) with the same action shape and the
+    same observation, or one that is its leading positions and velocities (Ant-v4's 27 entries of Ant-v5's 105)."""
     made_for = checkpoint_env(path) or env_id  # an unreadable file: load_expert says what is wrong with it
     policy, env = load_expert(path, made_for), make_env(env_id)
     structure = getattr(env.unwrapped, "observation_structure", {})
@@ -328,8 +270,7 @@ def retargeted_expert(path: str, env_id: str):
     return policy, made_for
 
 
-def checkpoint_env(path: str) -> Optional[str]:
-    """The env a checkpoint was made for, or None when the file does not read as one (load_expert then says why)."""
+def checkpoint_env(path: str) -> Optional[str]:  # the env it was made for; None: unreadable (load_expert says why)
     try:
         return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
     except Exception:
@@ -351,9 +292,8 @@ def eval_only(args: Args):
     # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
     policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-    # A policy acts well at the rate it was trained at: evaluate there unless told otherwise. Checkpoints
-    # written before frame skips were recorded were all trained at the env's own.
-    trained_at = checkpoint.get("frame_skip", native)
+    # a policy acts well at the rate it was trained at: evaluate there unless told otherwise
+    trained_at = checkpoint.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
     frame_skip = args.frame_skip or trained_at
     there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
     require(not args.ship_to or frame_skip == trained_at, f"{there}, drop --frame-skip {frame_skip} or --ship-to")
@@ -374,10 +314,7 @@ def eval_only(args: Args):
     print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
 
 
-# ----------------------------------------------------------------------------------------------
-# Demonstrations (--make-demos): the imitation files' input
-
-
+# ---- Demonstrations (--make-demos): the imitation files' input ----
 def generate_demos(
     env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0
 ) -> dict:
@@ -414,15 +351,13 @@ def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> st
     return f"demos/{env_id}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
 
 
-def make_demos(args: Args):
-    """Roll the expert out (seed 0, one thread: the same arrays the imitation files made before they only loaded them)
-    into demos/, with a meta that names the expert (its SHA-256) and its return. A file already made from the same
-    expert file with the same settings is kept."""
+def make_demos(args: Args):  # a file already made from the same expert file with the same settings is kept
+    """Roll the expert out (seed 0, one thread: the arrays the imitation files made before they only loaded them) into
+    demos/, with a meta that names the expert (its SHA-256) and its return."""
     native, frame_skip = env_frame_skip(args.env), env_frame_skip(args.env, args.frame_skip)
     default = 20000 if args.env.startswith("Hopper") else 10000
     num_samples = default if args.num_demo_samples is None else args.num_demo_samples
-    if num_samples <= 1:
-        raise UsageError(f"--num-demo-samples must be more than 1, got {num_samples}")
+    require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
     expert_path, path = args.checkpoint.format(env=args.env), demo_path(args.env, frame_skip, native, num_samples)
     expert = load_expert(expert_path, args.env)  # one clear line for a missing or wrong checkpoint
     with open(expert_path, "rb") as file:
@@ -455,31 +390,13 @@ def make_demos(args: Args):
     print(f"wrote {path}")
 
 
-# ----------------------------------------------------------------------------------------------
-# Training
-
-
-def validate(args: Args):
-    for name in (
-        "total_timesteps",
-        "num_envs",
-        "num_steps",
-        "num_minibatches",
-        "update_epochs",
-        "hidden",
-        "save_every_steps",
-        "eval_every_steps",
-        "train_eval_episodes",
-        "eval_episodes",
-        "threads",
-    ):
-        if getattr(args, name) <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    for name in ("learning_rate", "clip_coef", "max_grad_norm"):
-        if not getattr(args, name) > 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    if not (0 < args.gamma <= 1 and 0 <= args.gae_lambda <= 1):
-        raise UsageError("--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
+# ---- Training ----
+def validate(args: Args):  # `not value > 0` also refuses a NaN float
+    positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden save_every_steps"
+    positive += " eval_every_steps train_eval_episodes eval_episodes threads learning_rate clip_coef max_grad_norm"
+    for name in positive.split():
+        require(getattr(args, name) > 0, f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+    require(0 < args.gamma <= 1 and 0 <= args.gae_lambda <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
     if (args.num_envs * args.num_steps) % args.num_minibatches:
         raise UsageError("--num-minibatches must divide num-envs * num-steps")
 
@@ -487,8 +404,7 @@ def validate(args: Args):
 def train(args: Args):
     validate(args)
     native = env_frame_skip(args.env)
-    # Resolved before anything is made, so the run's args and checkpoints record the rate actually used;
-    # make_env(env, native) is the plain gym.make(env), so the default run is the same as before the flag.
+    # resolved first, so that args and checkpoints record the rate used; at the env's own, make_env is gym.make(env)
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
     rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
@@ -498,14 +414,14 @@ def train(args: Args):
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
 
-    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the last
-    # observation in info["final_obs"]; so every stored transition belongs to one episode, and a
-    # truncated episode can be bootstrapped from V(final_obs).
+    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the last one in
+    # info["final_obs"]: every stored transition belongs to one episode; a truncated one bootstraps from V(final_obs)
     envs = gym.vector.SyncVectorEnv(
         [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     obs_dim, act_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
+    action_low, action_high = envs.single_action_space.low, envs.single_action_space.high
     agent = Agent(obs_dim, act_dim, args.hidden)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     obs_rms, ret_rms = RunningMeanStd((obs_dim,)), RunningMeanStd()
@@ -528,100 +444,106 @@ def train(args: Args):
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
-        # state["args"] is a record only, never read back: checkpoints written under older flag names
-        # (run_dir, eval_every, save_every) resume, and the run goes on with the flags given now.
-        obs_rms.mean, obs_rms.var, obs_rms.count = (
-            state["obs_mean"].numpy(),
-            state["obs_var"].numpy(),
-            state["obs_count"],
-        )
-        ret_rms.mean, ret_rms.var, ret_rms.count = (
-            state["ret_mean"].numpy(),
-            state["ret_var"].numpy(),
-            state["ret_count"],
-        )
+        # state["args"] is a record only, never read back: old checkpoints resume, and the flags given now rule
+        for rms, name in ((obs_rms, "obs"), (ret_rms, "ret")):
+            rms.mean, rms.var = state[f"{name}_mean"].numpy(), state[f"{name}_var"].numpy()
+            rms.count = state[f"{name}_count"]
         global_step, best_return = state["global_step"], state["best_return"]
         print(f"resumed from {latest_path} at step {global_step}")
     elif args.resume:
         print(f"no {latest_path} yet: starting fresh")
 
-    def checkpoint(eval_return=None):
-        return make_checkpoint(args, envs, agent, optimizer, obs_rms, ret_rms, global_step, best_return, eval_return)
+    def checkpoint(eval_return=None):  # a plain dict of tensors and numbers (experts/README.md)
+        def to_tensor(x):
+            return torch.as_tensor(np.asarray(x), dtype=torch.float64)
+
+        return {
+            "format": "copycat-suite/expert-ppo/1",
+            "env_id": args.env,
+            "frame_skip": args.frame_skip,  # the rate it was trained at (None resolved above to the env's own)
+            "obs_shape": list(envs.single_observation_space.shape),
+            "action_shape": list(envs.single_action_space.shape),
+            "hidden": args.hidden,
+            "actor": agent.actor_mean.state_dict(),
+            "obs_mean": to_tensor(obs_rms.mean),
+            "obs_var": to_tensor(obs_rms.var),
+            "action_low": to_tensor(envs.single_action_space.low),
+            "action_high": to_tensor(envs.single_action_space.high),
+            "args": asdict(args),
+            "global_step": global_step,
+            "eval_return": eval_return,
+            "machine": machine(),  # where it was trained (checkpoints made before this have none)
+            # only needed to resume training:
+            "agent": agent.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "obs_count": obs_rms.count,
+            "ret_mean": to_tensor(ret_rms.mean),
+            "ret_var": to_tensor(ret_rms.var),
+            "ret_count": ret_rms.count,
+            "best_return": best_return,
+        }
 
     def frozen_policy():
         return ExpertPolicy(checkpoint())
 
+    def normalized(raw: np.ndarray) -> torch.Tensor:  # the observations as the networks read them
+        return torch.as_tensor(obs_rms.normalize(raw), dtype=torch.float32)
+
     batch_size = args.num_envs * args.num_steps
-    minibatch_size = batch_size // args.num_minibatches
-    obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim))
-    act_buf = torch.zeros((args.num_steps, args.num_envs, act_dim))
+    obs_buf, act_buf = (torch.zeros((args.num_steps, args.num_envs, dim)) for dim in (obs_dim, act_dim))
     logp_buf, rew_buf, done_buf, val_buf = (torch.zeros((args.num_steps, args.num_envs)) for _ in range(4))
 
     raw_obs, _ = envs.reset(seed=args.seed + global_step)  # a resumed run gets fresh episodes
     discounted_return = np.zeros(args.num_envs)  # for reward scaling, as gymnasium's NormalizeReward
-    episode_return, episode_length, recent_returns = np.zeros(args.num_envs), np.zeros(args.num_envs, int), []
+    episode_return, recent_returns = np.zeros(args.num_envs), []
     start_time, start_step = time.time(), global_step
     next_save, next_eval = global_step + args.save_every_steps, global_step + args.eval_every_steps
-    stopped_early = False
 
     while global_step < args.total_timesteps:
         optimizer.param_groups[0]["lr"] = args.learning_rate * max(1.0 - global_step / args.total_timesteps, 0.0)
 
-        # ---- rollout
-        for step in range(args.num_steps):
-            obs_rms.update(raw_obs)
-            obs = torch.as_tensor(obs_rms.normalize(raw_obs), dtype=torch.float32)
-            with torch.no_grad():
+        with torch.no_grad():  # ---- rollout (it and the advantage estimation below need no gradients)
+            for step in range(args.num_steps):
+                obs_rms.update(raw_obs)
+                obs = normalized(raw_obs)
                 action, logp, _, value = agent.action_and_value(obs)
-            raw_obs, reward, terminated, truncated, info = envs.step(
-                action.numpy().clip(envs.single_action_space.low, envs.single_action_space.high)
-            )
-            global_step += args.num_envs
-            episode_return += reward
-            episode_length += 1
+                raw_obs, reward, terminated, truncated, info = envs.step(action.numpy().clip(action_low, action_high))
+                global_step += args.num_envs
+                episode_return += reward
 
-            discounted_return = discounted_return * args.gamma + reward
-            ret_rms.update(discounted_return)
-            scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
-            done = terminated | truncated
-            if truncated.any():  # time limit, not death: bootstrap from the value of the last observation
-                final_obs = np.stack(
-                    [info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)]
-                )
-                with torch.no_grad():
-                    final_value = agent.value(
-                        torch.as_tensor(obs_rms.normalize(final_obs), dtype=torch.float32)
-                    ).numpy()
-                scaled_reward = scaled_reward + args.gamma * final_value * (truncated & ~terminated)
-            for i in np.flatnonzero(done):
-                recent_returns = (recent_returns + [episode_return[i]])[-20:]
-                episode_return[i], episode_length[i], discounted_return[i] = 0.0, 0, 0.0
+                discounted_return = discounted_return * args.gamma + reward
+                ret_rms.update(discounted_return)
+                scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
+                done = terminated | truncated
+                if truncated.any():  # time limit, not death: bootstrap from the value of the last observation
+                    final_obs = np.stack(
+                        [info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)]
+                    )
+                    final_value = agent.value(normalized(final_obs)).numpy()
+                    scaled_reward = scaled_reward + args.gamma * final_value * (truncated & ~terminated)
+                for i in np.flatnonzero(done):
+                    recent_returns = (recent_returns + [episode_return[i]])[-20:]
+                    episode_return[i], discounted_return[i] = 0.0, 0.0
 
-            obs_buf[step], act_buf[step], logp_buf[step], val_buf[step] = obs, action, logp, value
-            rew_buf[step] = torch.as_tensor(scaled_reward, dtype=torch.float32)
-            done_buf[step] = torch.as_tensor(done, dtype=torch.float32)
+                obs_buf[step], act_buf[step], logp_buf[step], val_buf[step] = obs, action, logp, value
+                rew_buf[step] = torch.as_tensor(scaled_reward, dtype=torch.float32)
+                done_buf[step] = torch.as_tensor(done, dtype=torch.float32)
 
-        # ---- generalised advantage estimation; done[t] cuts the episode after step t
-        with torch.no_grad():
-            next_value = agent.value(torch.as_tensor(obs_rms.normalize(raw_obs), dtype=torch.float32))
-        advantages, last_gae = torch.zeros_like(rew_buf), 0.0
-        for t in reversed(range(args.num_steps)):
-            following_value = next_value if t == args.num_steps - 1 else val_buf[t + 1]
-            not_done = 1.0 - done_buf[t]
-            delta = rew_buf[t] + args.gamma * following_value * not_done - val_buf[t]
-            advantages[t] = last_gae = delta + args.gamma * args.gae_lambda * not_done * last_gae
-        returns = advantages + val_buf
+            # ---- generalised advantage estimation; done[t] cuts the episode after step t
+            next_value = agent.value(normalized(raw_obs))
+            advantages, last_gae = torch.zeros_like(rew_buf), 0.0
+            for t in reversed(range(args.num_steps)):
+                following_value = next_value if t == args.num_steps - 1 else val_buf[t + 1]
+                not_done = 1.0 - done_buf[t]
+                delta = rew_buf[t] + args.gamma * following_value * not_done - val_buf[t]
+                advantages[t] = last_gae = delta + args.gamma * args.gae_lambda * not_done * last_gae
+            returns = advantages + val_buf
 
         # ---- PPO update
         b_obs, b_act = obs_buf.reshape(-1, obs_dim), act_buf.reshape(-1, act_dim)
-        b_logp, b_adv, b_ret, _ = (
-            logp_buf.reshape(-1),
-            advantages.reshape(-1),
-            returns.reshape(-1),
-            val_buf.reshape(-1),
-        )
+        b_logp, b_adv, b_ret = logp_buf.reshape(-1), advantages.reshape(-1), returns.reshape(-1)
         for _ in range(args.update_epochs):
-            for idx in torch.randperm(batch_size).split(minibatch_size):
+            for idx in torch.randperm(batch_size).split(batch_size // args.num_minibatches):
                 _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
                 ratio = (new_logp - b_logp[idx]).exp()
                 adv = (b_adv[idx] - b_adv[idx].mean()) / (b_adv[idx].std() + 1e-8)
@@ -653,12 +575,11 @@ def train(args: Args):
             next_save += args.save_every_steps
             save_atomically(checkpoint(), latest_path)
         if args.max_minutes and elapsed > args.max_minutes * 60 and global_step < args.total_timesteps:
-            stopped_early = True
             break
 
     save_atomically(checkpoint(), latest_path)
     envs.close()
-    if stopped_early:
+    if global_step < args.total_timesteps:  # stopped by --max-minutes
         print(
             f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume"
         )
@@ -672,10 +593,8 @@ def train(args: Args):
 if __name__ == "__main__":
     try:
         args = tyro.cli(Args)
-        if args.make_demos:
-            make_demos(args)
-        else:
-            eval_only(args) if args.eval_only else train(args)
+        mode = make_demos if args.make_demos else eval_only if args.eval_only else train
+        mode(args)
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
