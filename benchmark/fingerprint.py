@@ -46,9 +46,16 @@ PROBE_POLICY = REPO_ROOT / "results" / "h3" / "native_hidden" / "runs" / "bc_oh"
 PROBE_EVALUATION = dict(episodes=10, seed=11000)
 """the policy's final evaluation in its run (seed 1, epoch 1000: --seed 10000 * 1 + 1000, its --eval-episodes 10),
 whose mean its result JSON holds as that machine computed it"""
-PROBES = ("libm", "mujoco", "expert_forward", "policy_forward", "policy_evaluation", "training")
+PROBES = ("libm", "mujoco", "expert_forward", "policy_forward", "policy_evaluation", "matmul", "initialization",
+          "gradients", "adam_step", "training")
 """the probes in the order a run meets them: the C library's maths, the simulator, the two networks' forward passes, a
-closed loop of both, training"""
+closed loop of both, then training taken apart (matrix products, initial weights and minibatches, one backward pass,
+Adam steps), training"""
+MATMUL_SHAPES = {"forward": ((64, 22), (256, 22), lambda a, b: a @ b.T),
+                 "grad_input": ((64, 256), (256, 22), lambda a, b: a @ b),
+                 "grad_weight": ((64, 256), (64, 22), lambda a, b: a.T @ b)}
+"""the products of a Linear layer's forward pass and backward pass (batch 64, Hopper's 2-frame history of 11 to 256
+units), as torch runs them: (shape of a, shape of b, product)"""
 LIBM_FUNCTIONS = ("exp", "log", "sin", "cos", "pow", "atan2", "tanh")
 """the C library's functions the libm probe calls (MuJoCo's and gymnasium's maths)"""
 
@@ -162,19 +169,24 @@ def mujoco_probe(steps: int = 1000, amplitude: float = 0.5) -> str:
     return digest(*chunks)
 
 
-def policy_probes(rows: int = 1000, episodes: int = PROBE_EVALUATION["episodes"], seed=PROBE_EVALUATION["seed"]) -> dict:
-    """The forward passes of the shipped expert and of PROBE_POLICY on the first `rows` states of the shipped demos
-    (as one batch, and the first 20 one at a time, as a rollout feeds them), and PROBE_POLICY's evaluation returns
-    over `episodes` episodes from `seed` (scripts/evaluate.py's loading and the method file's own evaluate)."""
+def load_probe_policy() -> tuple:
+    """PROBE_POLICY as scripts/evaluate.py loads it: (its method file's module, the policy, its run's args)."""
     import importlib.util
-
-    import numpy as np
-    import torch
 
     spec = importlib.util.spec_from_file_location("evaluate", REPO_ROOT / "scripts" / "evaluate.py")
     evaluate = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(evaluate)  # puts the repository root on sys.path: the method files import
-    module, policy, args = evaluate.load_policy(PROBE_POLICY)
+    return evaluate.load_policy(PROBE_POLICY)
+
+
+def policy_probes(rows: int = 1000, episodes: int = PROBE_EVALUATION["episodes"], seed=PROBE_EVALUATION["seed"]) -> dict:
+    """The forward passes of the shipped expert and of PROBE_POLICY on the first `rows` states of the shipped demos
+    (as one batch, and the first 20 one at a time, as a rollout feeds them), and PROBE_POLICY's evaluation returns
+    over `episodes` episodes from `seed` (scripts/evaluate.py's loading and the method file's own evaluate)."""
+    import numpy as np
+    import torch
+
+    module, policy, args = load_probe_policy()
     import expert_ppo
 
     expert = expert_ppo.load_expert(str(SHIPPED_EXPERT), ENV)
@@ -193,8 +205,55 @@ def policy_probes(rows: int = 1000, episodes: int = PROBE_EVALUATION["episodes"]
             "policy_evaluation": returns}
 
 
+def matmul_probe() -> dict:
+    """{product: digest} of the matrix products in MATMUL_SHAPES on fixed float32 inputs (numpy's seeded generator):
+    MKL's sgemm, with each transpose a Linear layer's training asks of it."""
+    import numpy as np
+    import torch
+
+    rng, digests = np.random.default_rng(0), {}
+    for name, (shape_a, shape_b, product) in MATMUL_SHAPES.items():
+        a, b = (torch.as_tensor(rng.standard_normal(shape, dtype=np.float32)) for shape in (shape_a, shape_b))
+        digests[name] = digest(product(a, b).numpy().tobytes())
+    return digests
+
+
+def training_step_probes(rows: int = 64, steps: int = 10) -> dict:
+    """Training taken apart: the initial weights and input statistics of a policy the method makes after
+    torch.manual_seed(1) on those steps, and the minibatch indices a seeded generator draws; then, from PROBE_POLICY's weights on the first `rows` shipped demo
+    steps (velocities as recorded), one MSE loss and its gradients, {parameter: digest}, and the weights after 1 and
+    after `steps` Adam steps (the method's loss and optimizer, a fixed learning rate, the same minibatch each step)."""
+    import numpy as np
+    import torch
+
+    module, policy, args = load_probe_policy()
+    with np.load(SHIPPED_DEMOS) as demos:
+        histories = module.stack_history(demos["observations"][:rows], demos["episode_starts"][:rows], args.history)
+        targets = torch.as_tensor(demos["actions"][:rows], dtype=torch.float32)
+    inputs, weights = torch.as_tensor(histories, dtype=torch.float32), {}
+    torch.manual_seed(1)
+    fresh = module.make_policy(args, histories.shape[1] // args.history, targets.shape[1], inputs)
+    indices = torch.randint(20000, (100, 64), generator=torch.Generator().manual_seed(1))
+    initialization = {"weights": weights_fingerprint(dict(fresh.named_parameters())),
+                      "normalizer": weights_fingerprint(dict(fresh.named_buffers())),  # torch's mean and std
+                      "minibatches": digest(indices.numpy().tobytes())}
+    optimizer = torch.optim.Adam(policy.parameters(), lr=1e-4)
+    for step in range(1, steps + 1):
+        loss = ((policy(inputs) - targets) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        if step == 1:
+            gradients = {name: digest(p.grad.numpy().tobytes()) for name, p in policy.named_parameters()}
+            gradients["loss"] = digest(loss.detach().numpy().tobytes())
+        optimizer.step()
+        if step in (1, steps):
+            weights[f"after {step}"] = weights_fingerprint(dict(policy.named_parameters()))
+    return {"initialization": initialization, "gradients": gradients, "adam_step": weights}
+
+
 PROBE_CODE = "import json; from benchmark import fingerprint as f; print(json.dumps({'libm': f.libm_probe(), " \
-             "'mujoco': f.mujoco_probe(), **f.policy_probes()}))"
+             "'mujoco': f.mujoco_probe(), **f.policy_probes(), 'matmul': f.matmul_probe(), " \
+             "**f.training_step_probes()}))"
 """run in a fresh process, so that the mode's environment variables are set before MKL starts"""
 
 
@@ -270,7 +329,9 @@ def probe_differences(a: dict, b: dict) -> str:
     for name in (name for name in both if name not in same):
         x, y = a["probes"][name], b["probes"][name]
         gap = relative_range(*((x.get("evaluations"), y.get("evaluations")) if isinstance(x, dict) else (x, y)))
-        differ.append(f"{name} (returns {gap})" if gap else name)
+        parts = [key for key in x if key in y and x[key] != y[key]] if isinstance(x, dict) and "evaluations" not in x \
+            and isinstance(y, dict) else []  # a probe of named parts: name the parts that differ
+        differ.append(f"{name} (returns {gap})" if gap else f"{name} ({', '.join(parts)})" if parts else name)
     return f"probes the same: {', '.join(same) or 'none'}; different: {', '.join(differ) or 'none'}"
 
 

@@ -176,7 +176,22 @@ def test_the_stored_amd_epyc_record_agrees_with_the_pins():
     assert record["evaluations"] != returns
     arrays = {"observations", "actions", "episode_starts", "rewards", "terminations", "truncations"}
     assert set(record["demos"]) == {*arrays, "final_observations"} and len(record["weights"]) == 16
-    assert set(record["probes"]) == set(fingerprint.PROBES)
+    assert set(record["probes"]) <= set(fingerprint.PROBES) and "training" in record["probes"]
+
+
+def test_the_stored_intel_xeon_record_is_the_pins_bit_for_bit_and_parts_from_the_amd_in_training_alone():
+    """The record made on an Intel Xeon like the one the pins were recorded on (2026-12-04): its run gives the pins
+    exactly; against the AMD EPYC's, the demos and every probe before training agree and the weights do not."""
+    folder = REPO_ROOT / "results" / "fingerprints"
+    intel, amd = (json.loads((folder / name).read_text()) for name in (
+        "GenuineIntel_Intel_R_Xeon_R_Processor.json", "AuthenticAMD_AMD_EPYC.json"))
+    _, _, lines, returns = pinned.PINNED["bc_oh"]
+    assert intel["machine"]["cpu_vendor"] == "GenuineIntel" and intel["machine"]["MKL_CBWR"] == "COMPATIBLE"
+    assert intel["epoch_lines"] == lines and intel["evaluations"] == returns
+    assert set(intel["probes"]) == set(fingerprint.PROBES)
+    assert fingerprint.compare(intel, amd) == "weights"
+    assert fingerprint.probe_differences(intel, amd).startswith(
+        "probes the same: libm, mujoco, expert_forward, policy_forward, policy_evaluation; different: training")
 
 
 PROBED = {"mujoco": "2dd92469f3838844", "expert_forward": "8e85f2f60e550fa6", "policy_forward": "53ec3bcfb7c8469e",
@@ -221,6 +236,30 @@ def test_the_policy_probes_repeat_exactly_and_depend_on_the_rows():
     assert len(first["policy_evaluation"]) == 1 and np.isfinite(first["policy_evaluation"][0])
     fewer = fingerprint.policy_probes(rows=29, episodes=1, seed=0)
     assert fewer["expert_forward"] != first["expert_forward"] and fewer["policy_forward"] != first["policy_forward"]
+
+
+def test_the_training_step_probes_repeat_exactly_and_see_the_rows_and_the_steps():
+    first = fingerprint.training_step_probes(rows=32, steps=2)
+    assert first == fingerprint.training_step_probes(rows=32, steps=2)
+    assert set(first) == {"initialization", "gradients", "adam_step"} and set(first["adam_step"]) == {"after 1", "after 2"}
+    assert set(first["gradients"]) == {"loss", *(f"net.{i}.{p}" for i in (0, 2, 4) for p in ("weight", "bias"))}
+    fewer = fingerprint.training_step_probes(rows=31, steps=3)
+    assert all(fewer["gradients"][key] != value for key, value in first["gradients"].items())
+    assert fewer["initialization"]["normalizer"] != first["initialization"]["normalizer"]
+    assert fewer["initialization"]["minibatches"] == first["initialization"]["minibatches"]
+    assert fewer["adam_step"]["after 1"] != first["adam_step"]["after 1"] and "after 3" in fewer["adam_step"]
+
+
+def test_the_matmul_probe_covers_a_linear_layer_s_three_products():
+    digests = fingerprint.matmul_probe()
+    assert set(digests) == {"forward", "grad_input", "grad_weight"} and len(set(digests.values())) == 3
+    assert digests == fingerprint.matmul_probe()
+
+
+def test_a_probe_of_named_parts_names_the_parts_that_differ():
+    a = {"probes": {"gradients": {"net.0.weight": "1", "net.4.bias": "2", "loss": "3"}, "libm": "x"}}
+    b = {"probes": {"gradients": {"net.0.weight": "9", "net.4.bias": "2", "loss": "8"}, "libm": "x"}}
+    assert fingerprint.probe_differences(a, b) == "probes the same: libm; different: gradients (net.0.weight, loss)"
 
 
 def test_the_probe_s_evaluation_is_the_one_its_run_recorded():

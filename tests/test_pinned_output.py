@@ -8,7 +8,8 @@ re-recorded on an AMD EPYC (Zen 4) when its method changed on purpose (issue 33)
 What holds across machines, as measured (README, Reproducibility): in the fixed mode the printed epoch lines are
 the same on the Intel Xeon and the AMD EPYC, and so are pinned exactly; the evaluations differ between those two
 CPUs by up to 3.6e-8 relative (1e-10 to 4e-8 over the cases), so they are pinned to PIN_TOLERANCE, about 30 times
-that. On one CPU they are the same bit for bit (test_one_cpu_imitating_two). A change of a method moves them by far
+that; fca's by up to 1.05e-5, so it has its own (CASE_TOLERANCE). The difference is training's alone: the two CPUs' demos, forward passes and closed-loop evaluations of given
+weights agree bit for bit, their trained weights do not (benchmark/fingerprint.py's records, 2026-12-04). On one CPU they are the same bit for bit (test_one_cpu_imitating_two). A change of a method moves them by far
 more: test_a_changed_learning_rate_fails_the_pins shows it.
 
 The pins need a CPU with FMA and AVX2 (Intel since 2013, AMD since 2015): without them glibc's libm runs other code
@@ -28,6 +29,10 @@ from benchmark.machine import LIBM_FMA_FLAGS, cpu_flags
 
 PIN_TOLERANCE = 1e-6
 """relative, for the pinned evaluations: the Intel Xeon and the AMD EPYC differ by up to 3.6e-8 in the fixed mode"""
+CASE_TOLERANCE = {"fca": 3e-4}
+"""cases whose evaluations the two CPUs part further: fca (recorded on the AMD EPYC) gives, on the Intel Xeon, the same
+epoch lines and evaluations 4.0e-6 to 1.05e-5 relative apart (2026-12-04), so about 30 times that; a learning rate 10%
+off moves them by 7e-3 to 0.36 (test_a_changed_learning_rate_fails_the_pins)"""
 FIXED_MODE = {"MKL_CBWR": "COMPATIBLE"}
 """MKL's conditional numerical reproducibility: the same MKL kernels on every x86-64 CPU"""
 needs_mkl = pytest.mark.skipif(not torch.backends.mkl.is_available(), reason="this torch has no MKL (e.g. ARM): the pinned "
@@ -118,16 +123,18 @@ def test_a_run_prints_the_pinned_losses_and_evaluations(tmp_path, case):
     script, flags, lines, returns = PINNED[case]
     printed, evaluations, _ = tiny_run(tmp_path, script, flags, FIXED_MODE)
     assert printed == lines
-    assert evaluations == pytest.approx(returns, rel=PIN_TOLERANCE)
+    assert evaluations == pytest.approx(returns, rel=CASE_TOLERANCE.get(case, PIN_TOLERANCE))
 
 
 @needs_mkl
-def test_a_changed_learning_rate_fails_the_pins(tmp_path):
-    """The pins catch a change of a method: bc_oh at a learning rate 10% off its default (1e-5 on Hopper) moves every
-    evaluation by far more than PIN_TOLERANCE."""
-    script, flags, lines, returns = PINNED["bc_oh"]
+@pytest.mark.parametrize("case", ["bc_oh", "fca"])
+def test_a_changed_learning_rate_fails_the_pins(tmp_path, case):
+    """The pins catch a change of a method: a learning rate 10% off its default (1e-5 on Hopper) moves every
+    evaluation by far more than the case's tolerance, fca's wider one too."""
+    script, flags, lines, returns = PINNED[case]
     _, evaluations, _ = tiny_run(tmp_path, script, [*flags, "--learning-rate", 1.1e-5], FIXED_MODE)
-    assert all(abs(value - pinned) > 100 * PIN_TOLERANCE * abs(pinned) for value, pinned in zip(evaluations, returns))
+    tolerance = CASE_TOLERANCE.get(case, PIN_TOLERANCE)
+    assert all(abs(value - pinned) > 20 * tolerance * abs(pinned) for value, pinned in zip(evaluations, returns))
 
 
 @needs_mkl
