@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # tooling may import the repository's benchmark package
 from benchmark.aggregate import page_parts  # noqa: E402
-from benchmark.results import OneLineParser, run_cli, write_text  # noqa: E402
+from benchmark.results import OneLineParser, UsageError, run_cli, write_text  # noqa: E402
 
 PAGE = Path("docs/contributing.md")
 """the page whose <!-- sizes --> block --page writes when it names no page"""
@@ -59,7 +59,10 @@ def budget(name: str) -> dict:
 
 def formatted(name: str) -> str:
     """The file as `ruff format --line-length 120` writes it."""
-    done = subprocess.run(["ruff", "format", "--line-length", "120", "-"], input=(ROOT / f"{name}.py").read_text(), capture_output=True, text=True, check=True)
+    try:
+        done = subprocess.run(["ruff", "format", "--line-length", "120", "-"], input=(ROOT / f"{name}.py").read_text(), capture_output=True, text=True, check=True)
+    except FileNotFoundError:
+        raise UsageError("ruff is not on PATH: pip install -r requirements.txt (it pins ruff), in the active venv")
     return done.stdout
 
 
