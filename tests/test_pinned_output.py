@@ -8,9 +8,10 @@ re-recorded on an AMD EPYC (Zen 4) when its method changed on purpose (issue 33)
 What holds across machines, as measured (README, Reproducibility): in the fixed mode the printed epoch lines are
 the same on the Intel Xeon and the AMD EPYC, and so are pinned exactly; the evaluations differ between those two
 CPUs by up to 3.6e-8 relative (1e-10 to 4e-8 over the cases), so they are pinned to PIN_TOLERANCE, about 30 times
-that; fca's by up to 1.05e-5, so it has its own (CASE_TOLERANCE). The difference is training's alone: the two CPUs' demos, forward passes and closed-loop evaluations of given
-weights agree bit for bit, their trained weights do not (benchmark/fingerprint.py's records, 2026-12-04). On one CPU they are the same bit for bit (test_one_cpu_imitating_two). A change of a method moves them by far
-more: test_a_changed_learning_rate_fails_the_pins shows it.
+that; fca's by up to 1.05e-5, so it has its own (CASE_TOLERANCE). The difference is training's alone: the two
+CPUs' demos, forward passes and closed-loop evaluation of a committed policy agree bit for bit, their trained weights
+do not (benchmark/fingerprint.py's records, 2026-12-04). On one CPU they are the same bit for bit
+(test_one_cpu_imitating_two). A change of a method moves them by far more: test_a_changed_learning_rate_fails_the_pins shows it.
 
 The pins need a CPU with FMA and AVX2 (Intel since 2013, AMD since 2015): without them glibc's libm runs other code
 for exp, sin, cos and pow, MuJoCo's trajectories part in their last bits, and the demonstrations and epoch lines
@@ -31,7 +32,8 @@ PIN_TOLERANCE = 1e-6
 """relative, for the pinned evaluations: the Intel Xeon and the AMD EPYC differ by up to 3.6e-8 in the fixed mode"""
 CASE_TOLERANCE = {"fca": 3e-4}
 """cases whose evaluations the two CPUs part further: fca (recorded on the AMD EPYC) gives, on the Intel Xeon, the same
-epoch lines and evaluations 4.0e-6 to 1.05e-5 relative apart (2026-12-04), so about 30 times that; a learning rate 10%
+epoch lines and evaluations 4.0e-6 to 1.05e-5 relative apart (2026-12-04; the tolerance was set after that one
+measurement), so about 30 times that; a learning rate 10%
 off moves them by 7e-3 to 0.36 (test_a_changed_learning_rate_fails_the_pins)"""
 FIXED_MODE = {"MKL_CBWR": "COMPATIBLE"}
 """MKL's conditional numerical reproducibility: the same MKL kernels on every x86-64 CPU"""
