@@ -114,7 +114,7 @@ class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^
 
 
 # Copied from bc_oh.make_env
-def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids

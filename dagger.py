@@ -14,7 +14,6 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import List, Optional
 
 import gymnasium as gym
 import mujoco
@@ -30,23 +29,23 @@ METHOD = "dagger"
 class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
-    frame_skip: Optional[int] = None
+    frame_skip: int | None = None
     """simulator steps per action; None: the env's own (docs/methods.md)"""
-    seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, scored as mean ± std; a rerun keeps the finished ones"""
-    workers: Optional[int] = None
+    workers: int | None = None
     """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
-    demos: Optional[str] = None
+    demos: str | None = None
     """demonstrations (.npz); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that labels every DAgger round's states (queried online)"""
-    num_demo_samples: Optional[int] = None
+    num_demo_samples: int | None = None
     """demonstration steps; None: 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
     obs_noise_std: float = 0.2
     """std of the Gaussian noise on the velocity entries of each observation"""
     hide_velocities: bool = False
     """zero the velocity entries instead (positions only)"""
-    velocity_dims: Optional[List[int]] = None
+    velocity_dims: list[int] | None = None
     """indices of the velocity entries, for envs not in the built-in table"""
     history: int = 2
     """frames in the observation history"""
@@ -54,7 +53,7 @@ class Args:
     """epochs of num-samples / batch-size minibatches drawn with replacement"""
     batch_size: int = 64
     """minibatch size"""
-    learning_rate: Optional[float] = None
+    learning_rate: float | None = None
     """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 256
     """width of the hidden layers"""
@@ -74,7 +73,7 @@ class Args:
     """rounds of rolling out, labelling, aggregating and training on"""
     dagger_epochs: int = 100
     """epochs per round over the aggregated data, the learning rate restarting each round"""
-    dagger_beta_rounds: Optional[int] = None
+    dagger_beta_rounds: int | None = None
     """round r executes the expert with probability beta = max(0, 1 - r / this); None: --dagger-rounds"""
 
 
@@ -197,11 +196,11 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
-    round_number, round_start, epochs = 0, 0, ends[-1]  # round_start: where the learning rate last restarted
-    for epoch in range(1, epochs + 1):
-        if epoch > ends[round_number]:  # the next round: aggregate, then train on the aggregate
-            round_number, round_start = round_number + 1, step
-            num_samples = aggregate(round_number)
+    r, round_start, args = 0, 0, replace(args, epochs=ends[-1])  # r: the round; from here --epochs counts all
+    for epoch in range(1, args.epochs + 1):
+        if epoch > ends[r]:  # the next round: aggregate, then train on the aggregate
+            r, round_start = r + 1, step
+            num_samples = aggregate(r)
             steps_per_epoch = num_samples // args.batch_size
             total_steps = args.dagger_epochs * steps_per_epoch
         epoch_start = time.time()
@@ -212,19 +211,19 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             step += 1
         last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
         train_time += time.time() - epoch_start
-        evaluating = epoch % args.eval_every == 0 or epoch == ends[round_number]
+        evaluating = epoch % args.eval_every == 0 or epoch == ends[r]
         if evaluating:
             policy.eval()
-            for k in range(3 if epoch == epochs else 1):  # the final learner: 3 evaluations, on disjoint episodes
+            for k in range(3 if epoch == args.epochs else 1):  # the final learner: 3 evaluations, on disjoint episodes
                 episodes_seed = 10_000 * seed + epoch + k * args.eval_episodes
                 returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
                 evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if evaluating or epoch % max(1, epochs // 20) == 0:
+        if evaluating or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            line = f"seed {seed} | round {round_number} | epoch {epoch}/{epochs} | loss {last_loss:.5f}"
-            eta = job_eta(args, seed, start, epoch / epochs)
-            print(f"{line} | last eval {last} | {1000 * train_time / step:.2f} ms/step | {eta}", flush=True)
+            line = f"seed {seed} | round {r} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last}"
+            eta = job_eta(args, seed, start, epoch / args.epochs)
+            print(f"{line} | {1000 * train_time / step:.2f} ms/step | {eta}", flush=True)
     return evaluations, 1000 * train_time / step
 
 
@@ -232,11 +231,11 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # Copied from bc_oh.evaluate
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
-    env = make_env(args.env, args.frame_skip)
-    dims, low, high = velocity_dims(env, args.env, args.velocity_dims), env.action_space.low, env.action_space.high
-    noise, skip = (args.obs_noise_std, args.hide_velocities), args.frame_skip
+    dims, skip = velocity_dims(make_env(args.env), args.env, args.velocity_dims), args.frame_skip
+    noise = (args.obs_noise_std, args.hide_velocities)
     makers = [lambda i=i: PartialObservation(make_env(args.env, skip), dims, *noise, seed + i) for i in range(episodes)]
     envs = gym.vector.SyncVectorEnv(makers, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    low, high = envs.single_action_space.low, envs.single_action_space.high
     obs, _ = envs.reset(seed=seed)
     frames = np.repeat(obs[:, None], args.history, axis=1)  # [o_{t-H+1}, ..., o_t]: stack_history's first-frame rule
     returns, running = np.zeros(episodes), np.ones(episodes, bool)
@@ -246,7 +245,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
         returns += reward * running
         running &= ~(terminated | truncated)  # each env plays one episode: what follows its end does not count
         frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
-    env.close()
     envs.close()
     return returns.tolist()
 
@@ -261,7 +259,6 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     check_dagger_args(args)
     args.learning_rate = args.learning_rate or (1e-5 if args.env.startswith("Hopper") else 1e-4)
-    torch.set_num_threads(1)  # small networks gain nothing from more threads, and runs can share a machine
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
     os.makedirs(output_dir, exist_ok=True)
@@ -294,7 +291,7 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
 
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
+    torch.set_num_threads(1)  # small networks gain nothing from more; first: a worker starts with all the cores
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
     score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
@@ -333,7 +330,7 @@ def run_name(args) -> str:  # METHOD, then each flag changed from its default th
     return "__".join([METHOD, *changed])
 
 
-def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
+def finished_seed(output_dir: str, seed: int, args) -> dict | None:
     ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")  # flags that change no result
     try:
         result = json.loads(Path(output_dir, f"result_seeds{seed}.json").read_text())
@@ -349,10 +346,9 @@ def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
 def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # result_seeds<seeds>.json: scores, mean, std
     scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
-    result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
-    result.update(std=float(np.std(scores)), **more)
+    result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=np.mean(scores), std=np.std(scores))
     path = Path(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
-    path.write_text(json.dumps(result, indent=1))  # written plainly: a reader refuses a half-written file
+    path.write_text(json.dumps({**result, **more}, indent=1))  # written plainly: a reader refuses a half-written file
     return str(path)
 
 
@@ -409,7 +405,7 @@ class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^
         return obs
 
 
-def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids

@@ -109,7 +109,7 @@ def require(condition, message: str):  # refuse bad input in one line: a UsageEr
 
 
 # Copied from bc_oh.make_env
-def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids

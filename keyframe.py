@@ -14,7 +14,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import List, Literal, Optional
+from typing import Literal
 
 import gymnasium as gym
 import mujoco
@@ -30,21 +30,21 @@ METHOD = "keyframe"
 class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
-    frame_skip: Optional[int] = None
+    frame_skip: int | None = None
     """simulator steps per action; None: the env's own (docs/methods.md)"""
-    seeds: List[int] = field(default_factory=lambda: [1, 2, 3])
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, scored as mean ± std; a rerun keeps the finished ones"""
-    workers: Optional[int] = None
+    workers: int | None = None
     """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
-    demos: Optional[str] = None
+    demos: str | None = None
     """demonstrations (.npz); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
-    num_demo_samples: Optional[int] = None
+    num_demo_samples: int | None = None
     """demonstration steps; None: 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
     obs_noise_std: float = 0.2
     """std of the Gaussian noise on the velocity entries of each observation"""
     hide_velocities: bool = False
     """zero the velocity entries instead (positions only)"""
-    velocity_dims: Optional[List[int]] = None
+    velocity_dims: list[int] | None = None
     """indices of the velocity entries, for envs not in the built-in table"""
     history: int = 2
     """frames in the observation history"""
@@ -52,7 +52,7 @@ class Args:
     """epochs of num-samples / batch-size minibatches drawn with replacement"""
     batch_size: int = 64
     """minibatch size"""
-    learning_rate: Optional[float] = None
+    learning_rate: float | None = None
     """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 256
     """width of the hidden layers"""
@@ -219,11 +219,11 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # ---- Evaluation ----
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
-    env = make_env(args.env, args.frame_skip)
-    dims, low, high = velocity_dims(env, args.env, args.velocity_dims), env.action_space.low, env.action_space.high
-    noise, skip = (args.obs_noise_std, args.hide_velocities), args.frame_skip
+    dims, skip = velocity_dims(make_env(args.env), args.env, args.velocity_dims), args.frame_skip
+    noise = (args.obs_noise_std, args.hide_velocities)
     makers = [lambda i=i: PartialObservation(make_env(args.env, skip), dims, *noise, seed + i) for i in range(episodes)]
     envs = gym.vector.SyncVectorEnv(makers, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    low, high = envs.single_action_space.low, envs.single_action_space.high
     obs, _ = envs.reset(seed=seed)
     frames = np.repeat(obs[:, None], args.history, axis=1)  # [o_{t-H+1}, ..., o_t]: stack_history's first-frame rule
     returns, running = np.zeros(episodes), np.ones(episodes, bool)
@@ -233,7 +233,6 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
         returns += reward * running
         running &= ~(terminated | truncated)  # each env plays one episode: what follows its end does not count
         frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
-    env.close()
     envs.close()
     return returns.tolist()
 
@@ -247,7 +246,6 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
     args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded with the results
     make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     args.learning_rate = args.learning_rate or (1e-5 if args.env.startswith("Hopper") else 1e-4)
-    torch.set_num_threads(1)  # small networks gain nothing from more threads, and runs can share a machine
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
     os.makedirs(output_dir, exist_ok=True)
@@ -279,7 +277,7 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
 
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    torch.set_num_threads(1)  # first: a worker process starts with torch's default of all the cores
+    torch.set_num_threads(1)  # small networks gain nothing from more; first: a worker starts with all the cores
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
     score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
@@ -316,7 +314,7 @@ def run_name(args) -> str:  # METHOD, then each flag changed from its default th
     return "__".join([METHOD, *changed])
 
 
-def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
+def finished_seed(output_dir: str, seed: int, args) -> dict | None:
     ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")  # flags that change no result
     try:
         result = json.loads(Path(output_dir, f"result_seeds{seed}.json").read_text())
@@ -332,10 +330,9 @@ def finished_seed(output_dir: str, seed: int, args) -> Optional[dict]:
 def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # result_seeds<seeds>.json: scores, mean, std
     scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
     recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
-    result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=float(np.mean(scores)))
-    result.update(std=float(np.std(scores)), **more)
+    result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=np.mean(scores), std=np.std(scores))
     path = Path(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
-    path.write_text(json.dumps(result, indent=1))  # written plainly: a reader refuses a half-written file
+    path.write_text(json.dumps({**result, **more}, indent=1))  # written plainly: a reader refuses a half-written file
     return str(path)
 
 
@@ -392,7 +389,7 @@ class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^
         return obs
 
 
-def make_env(env_id: str, frame_skip: Optional[int] = None) -> gym.Env:
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids

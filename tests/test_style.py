@@ -11,14 +11,14 @@ from conftest import REPO_ROOT
 FILES = [f"{name}.py" for name in file_sizes.TARGETS] + ["expert_ppo.py"]
 """the method files and the expert: what users copy"""
 CEILINGS = {
-    "bc_oh": 419,
-    "bc_so": 421,
-    "history_dropout": 429,
-    "c2f": 498,
-    "fca": 493,
-    "keyframe": 487,
-    "average_ensemble": 463,
-    "dagger": 539,
+    "bc_oh": 415,
+    "bc_so": 417,
+    "history_dropout": 425,
+    "c2f": 495,
+    "fca": 489,
+    "keyframe": 484,
+    "average_ensemble": 459,
+    "dagger": 535,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
