@@ -196,7 +196,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
-    r, round_start, args = 0, 0, replace(args, epochs=ends[-1])  # r: the round; from here --epochs counts all
+    r, round_start, args = 0, 0, replace(args, epochs=ends[-1])  # r: the round; args.epochs: all rounds' epochs
     for epoch in range(1, args.epochs + 1):
         if epoch > ends[r]:  # the next round: aggregate, then train on the aggregate
             r, round_start = r + 1, step
