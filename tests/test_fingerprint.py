@@ -250,10 +250,21 @@ def test_the_training_step_probes_repeat_exactly_and_see_the_rows_and_the_steps(
     assert fewer["adam_step"]["after 1"] != first["adam_step"]["after 1"] and "after 3" in fewer["adam_step"]
 
 
-def test_the_matmul_probe_covers_a_linear_layer_s_three_products():
+def test_the_matmul_probe_covers_each_linear_layer_s_three_products():
     digests = fingerprint.matmul_probe()
-    assert set(digests) == {"forward", "grad_input", "grad_weight"} and len(set(digests.values())) == 3
-    assert digests == fingerprint.matmul_probe()
+    first, rest = {"forward", "grad_input", "grad_weight"}, {"256-256", "256-3"}
+    assert set(digests) == first | {f"{kind} {layer}" for kind in first for layer in rest}
+    assert len(set(digests.values())) == 9 and digests == fingerprint.matmul_probe()
+
+
+def test_a_probe_of_named_parts_is_compared_on_the_parts_both_records_hold():
+    older = {"probes": {"matmul": {"forward": "1", "grad_input": "2"}}}
+    newer = {"probes": {"matmul": {"forward": "1", "grad_input": "2", "forward 256-3": "3"}}}
+    assert fingerprint.probe_differences(older, newer) == "probes the same: matmul; different: none"
+    moved = {"probes": {"matmul": {**newer["probes"]["matmul"], "grad_input": "9"}}}
+    assert fingerprint.probe_differences(older, moved) == "probes the same: none; different: matmul (grad_input)"
+    renamed = {"probes": {"matmul": {"forward 22-256": "1"}}}
+    assert fingerprint.probe_differences(older, renamed) == "probes the same: none; different: matmul"
 
 
 def test_a_probe_of_named_parts_names_the_parts_that_differ():
