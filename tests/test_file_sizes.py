@@ -76,7 +76,6 @@ def test_the_budget_of_a_real_file_sums_to_its_formatted_lines_and_is_printed_in
     assert capsys.readouterr().out == f"c2f.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{p} {n}" for p, n in parts.items()) + "\n"
 
 
-
 def test_without_ruff_it_says_so_in_one_line():
     result = run_script("scripts/file_sizes.py", env={"PATH": ""})
     assert_usage_error(result, "ruff is not on PATH: pip install -r requirements.txt")
