@@ -263,15 +263,11 @@ def load_demos(args, env: gym.Env) -> tuple:  # (demos, meta) of --demos or `exp
     bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
     require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
-    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
+    step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
+    copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()  # / Var(a): near 0, a shortcut; near 2, none
+    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f}"
     print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
-
-
-# Copied from bc_oh.copy_error
-def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())  # / Var(a): near 0, a shortcut; near 2, none
 
 
 def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:

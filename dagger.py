@@ -196,6 +196,8 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     steps_per_epoch = num_samples // args.batch_size
     total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
     generator = torch.Generator(device=device).manual_seed(seed)
+    workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0  # for the job's ETA:
+    waves_after = (len(args.seeds) - 1) // workers - position // workers  # this seed's rest, then the waves after it
     r, round_start, args = 0, 0, replace(args, epochs=ends[-1])  # r: the round; args.epochs: all rounds' epochs
     for epoch in range(1, args.epochs + 1):
         if epoch > ends[r]:  # the next round: aggregate, then train on the aggregate
@@ -222,8 +224,8 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
         if evaluating or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             line = f"seed {seed} | round {r} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last}"
-            eta = job_eta(args, seed, start, epoch / args.epochs)
-            print(f"{line} | {1000 * train_time / step:.2f} ms/step | {eta}", flush=True)
+            eta = (time.time() - start) * (1 - epoch / args.epochs + waves_after) / (epoch / args.epochs) / 60
+            print(f"{line} | {1000 * train_time / step:.2f} ms/step | job ETA {eta:.1f} min", flush=True)
     return evaluations, 1000 * train_time / step
 
 
@@ -251,7 +253,15 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
-    check_common_args(args)
+    for key in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
+        value, flag = getattr(args, key, None), f"--{key.replace('_', '-')}"  # before anything slow happens
+        require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
+    require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
+    seeds = " ".join(map(str, args.seeds)) or "none"
+    require(len(set(args.seeds)) == len(args.seeds) > 0, f"--seeds needs distinct seeds, got {seeds}: e.g. 1 2 3")
+    samples, batch = args.num_demo_samples, args.batch_size
+    require(samples is None or samples > batch, f"--num-demo-samples must exceed --batch-size {batch}, got {samples}")
+    require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
     name = run_name(args)  # before the defaults are filled in: it names what the user changed
     env = make_env(args.env)
     velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
@@ -271,12 +281,12 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
     if len(to_train) > args.workers:
         waiting = ", ".join(map(str, to_train[args.workers :]))
         print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # job_eta counts to_train
+    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # the ETA counts to_train
     try:
         if args.workers == 1:
             entries = [train_and_record(*job) for job in jobs]
         else:  # spawn, not fork: torch and MuJoCo are not fork-safe
-            with multiprocessing.get_context("spawn").Pool(args.workers, start_worker) as pool:
+            with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
                 entries = pool.starmap(train_and_record, jobs, chunksize=1)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
         lost = [s for s in to_train if not finished_seed(output_dir, s, args)]
@@ -284,14 +294,23 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
         where = f"seeds {', '.join(map(str, done))} finished and kept, {', '.join(map(str, lost))} lost"
         sys.exit(f"interrupted: {where}: the same command trains only those")
     per_seed.update(zip(to_train, entries))
-    result_path = write_result(output_dir, args, per_seed)
+    result_path, scores = write_result(output_dir, args, per_seed), [entry["score"] for entry in per_seed.values()]
     rows = [f"{s:>6} | {entry['score']:8.1f} | {entry['bc_oh_score']:15.1f}" for s, entry in per_seed.items()]
     print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}\n" + "\n".join(rows))
-    print(f"result: {result_path}\n{summary_line(args, [entry['score'] for entry in per_seed.values()], meta)}")
+    mean, plural, skip = np.mean(scores), "s" * (len(scores) > 1), meta.get("expert_frame_skip")
+    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
+    if "expert_return" in meta:  # demos from elsewhere (e.g. Minari) have no expert to compare with
+        share = round(mean / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
+        rate = "" if skip == args.frame_skip else f" at its own frame skip {skip}"
+        line += f", {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
+    print(f"result: {result_path}\n{line}")
 
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     torch.set_num_threads(1)  # small networks gain nothing from more; first: a worker starts with all the cores
+    if multiprocessing.parent_process():  # a pool worker: Ctrl-C is the main process's, and each printed line is one
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # write (unbuffered, print's "\n" is a write apart)
+        sys.stdout.reconfigure(line_buffering=True, write_through=False)
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
     score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
@@ -307,18 +326,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     return entry
 
 
-# Copied from bc_oh.job_eta..make_env
-def job_eta(args, seed: int, start: float, done: float) -> str:  # whole job: this seed's rest, then waves after it
-    workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0
-    waves_after = (len(args.seeds) - 1) // workers - position // workers
-    return f"job ETA {(time.time() - start) * (1 - done + waves_after) / done / 60:.1f} min"
-
-
-def start_worker():  # a pool worker: Ctrl-C is the main process's, and each printed line is one write
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, print's "\n" is a write apart
-
-
+# Copied from bc_oh.run_name..make_env
 def run_name(args) -> str:  # METHOD, then each flag changed from its default that changes results (c2f__fusion-early)
     defaults, changed = type(args)(), []
     for name, value in asdict(args).items():
@@ -352,34 +360,12 @@ def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # resul
     return str(path)
 
 
-def summary_line(args, scores: list, meta: dict) -> str:  # mean ± std; its share of the expert's return in the demos
-    plural = "s" * (len(scores) > 1)
-    line = f"{args.env} {METHOD}: {np.mean(scores):.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
-    if "expert_return" not in meta:  # demos from elsewhere (e.g. Minari): no expert to compare with
-        return line
-    share = round(np.mean(scores) / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
-    rate = "" if meta["expert_frame_skip"] == args.frame_skip else f" at its own frame skip {meta['expert_frame_skip']}"
-    return f"{line}, {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
-
-
 class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
 
 
 def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
-
-
-def check_common_args(args):  # refuse bad values of the flags every method shares, before anything slow happens
-    for name in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
-        value, flag = getattr(args, name, None), f"--{name.replace('_', '-')}"
-        require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
-    require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
-    seeds = " ".join(map(str, args.seeds)) or "none"
-    require(len(set(args.seeds)) == len(args.seeds) > 0, f"--seeds needs distinct seeds, got {seeds}: e.g. 1 2 3")
-    samples, batch = args.num_demo_samples, args.batch_size
-    require(samples is None or samples > batch, f"--num-demo-samples must exceed --batch-size {batch}, got {samples}")
-    require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
 
 
 def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
@@ -498,14 +484,11 @@ def load_demos(args, env: gym.Env) -> tuple:  # (demos, meta) of --demos or `exp
     bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
     require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
     require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
-    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error(actions, starts):.3f}"
+    step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
+    copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()  # / Var(a): near 0, a shortcut; near 2, none
+    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f}"
     print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
-
-
-def copy_error(actions: np.ndarray, episode_starts: np.ndarray) -> float:
-    step_error = ((actions[1:] - actions[:-1])[~episode_starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
-    return float((step_error / np.maximum(actions.var(0), 1e-12)).mean())  # / Var(a): near 0, a shortcut; near 2, none
 
 
 def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:

@@ -31,11 +31,10 @@ ANCHORS = "| CleanRL `ppo_continuous_action.py` (for comparison) | 353 | 14.6k |
 """the two single-file anchors, measured in their own repositories (../shared/STYLE.md)"""
 
 
-PARTS = {"run": ("run", "train_and_record", "job_eta", "start_worker", "run_name", "finished_seed", "write_result",
-                 "summary_line", "member_summary"),
-         "errors and flag checks": ("UsageError", "require", "check_common_args"), "evaluation": ("evaluate",),
+PARTS = {"run": ("run", "train_and_record", "run_name", "finished_seed", "write_result", "member_summary"),
+         "errors": ("UsageError", "require"), "evaluation": ("evaluate",),
          "env and partial observability": ("velocity_dims", "PartialObservation", "make_env"),
-         "data": ("load_demos", "copy_error", "partially_observe", "stack_history")}
+         "data": ("load_demos", "partially_observe", "stack_history")}
 """the parts of a method file by its top-level definitions; `Args` is its own part, and every other definition is the
 method's (network, loss, training step, train_seed, fit; DAgger's expert); the rest (header, imports, banners, copy
 markers, the blank lines between definitions, `__main__`) is counted as such"""

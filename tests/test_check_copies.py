@@ -166,7 +166,7 @@ def test_every_method_file_is_checked():
     """Every method file carries checked copies of all of bc_oh's shared plumbing, so that the checker covers
     it: a block rewritten by hand in one file (no marker, or a marker lost) fails here."""
     plumbing = shared_plumbing()
-    assert {"run", "make_env", "load_demos", "job_eta", "require", "evaluate", "fit"} <= set(plumbing)
+    assert {"run", "make_env", "load_demos", "run_name", "require", "evaluate", "fit"} <= set(plumbing)
     # the method files only load demos, and the harness records the machine: none of them carries these any more
     gone = {"load_or_generate_demos", "generate_demos", "demo_meta", "load_expert", "ExpertPolicy", "CudaGraphStep",
             "make_adam", "set_learning_rate", "machine", "write_atomically"}

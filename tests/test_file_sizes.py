@@ -64,7 +64,7 @@ def test_the_budget_gives_each_definitions_lines_to_its_part_and_sums_to_the_fil
               "    return 2\n\n\ndef load_demos():\n    return 3\n")
     (tmp_path / "bc_oh.py").write_text(source)
     monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
-    assert file_sizes.budget("bc_oh") == {"Args": 2, "the method": 2, "run": 3, "errors and flag checks": 0, "evaluation": 0,
+    assert file_sizes.budget("bc_oh") == {"Args": 2, "the method": 2, "run": 3, "errors": 0, "evaluation": 0,
                                           "env and partial observability": 0, "data": 2, "the rest": 11}
     assert len(file_sizes.formatted("bc_oh").splitlines()) == 20  # ruff puts a blank line after the docstring
 

@@ -108,14 +108,21 @@ def test_hidden_velocities_train_on_zeroed_velocities(monkeypatch):
 # The copy error of the demos
 
 
-def test_copy_error_against_hand_computed_values():
-    actions = np.array([[0.0], [1.0], [2.0]])
-    # steps 0->1 and 1->2 both differ by 1: MSE 1; Var([0, 1, 2]) = 2/3
-    assert bc_oh.copy_error(actions, np.array([True, False, False])) == pytest.approx(1.5)
-    # a new episode at row 2: only the pair (0, 1) counts, still MSE 1
-    assert bc_oh.copy_error(actions, np.array([True, False, True])) == pytest.approx(1.5)
-    two_dims = np.array([[0.0, 5.0], [1.0, 5.0], [0.0, 7.0], [1.0, 7.0]])  # dim 0: MSE 1 / Var 0.25; dim 1: 4/3 / 1
-    assert bc_oh.copy_error(two_dims, np.array([True, False, False, False])) == pytest.approx((4 + 4 / 3) / 2)
+def test_the_copy_error_line_against_hand_computed_values(tmp_path, capsys):
+    """Episodes 0, 1, 0, 1, ... and -1, 0, -1, 0, ...: within them each step changes by 1 (MSE 1) and Var(a) = 0.5, so
+    the copy error is 2.000; the step across the episode boundary (1 to -1) does not count (with it, 2.154). A slow
+    ramp, a step of 1/39 across [0, 1], is the shortcut: (1/39)^2 / Var = 12 / 1599 = 0.008."""
+    def copy_error_line(actions):
+        path = tmp_path / f"demos{len(list(tmp_path.iterdir()))}.npz"
+        starts = np.arange(40) % 20 == 0
+        np.savez(path, observations=np.zeros((40, 11)), actions=actions, episode_starts=starts)
+        load_demos(bc_oh, demos=str(path))
+        return next(line for line in capsys.readouterr().out.splitlines() if line.startswith("demos:"))
+
+    alternating = np.repeat((np.arange(40) % 2 - (np.arange(40) >= 20))[:, None], 3, axis=1).astype(np.float32)
+    assert "copy error MSE(a_t-1, a_t)/Var(a) = 2.000 (near 0" in copy_error_line(alternating)
+    ramp = np.repeat((np.arange(40) / 39)[:, None], 3, axis=1).astype(np.float32)
+    assert "copy error MSE(a_t-1, a_t)/Var(a) = 0.008 (near 0" in copy_error_line(ramp)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -127,18 +134,24 @@ def meta_of(path) -> dict:
         return json.loads(str(data["meta"]))
 
 
+def reported_copy_error(out: str) -> float:
+    line = next(line for line in out.splitlines() if line.startswith("demos:"))
+    return float(line.split("copy error MSE(a_t-1, a_t)/Var(a) = ")[1].split()[0])
+
+
 def test_demos_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
-    """The method file loads, at --frame-skip 1, the file --make-demos wrote at that rate, and says its copy error."""
+    """The method file loads, at --frame-skip 1, the file --make-demos wrote at that rate, and says its copy error:
+    smaller than at the native rate (the actions change less from one step to the next)."""
     monkeypatch.chdir(link_experts(tmp_path))
     fast, meta = load_demos(bc_oh, num_demo_samples=120, frame_skip=1)
-    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("demos:"))
-    assert line.startswith("demos: 120 steps from demos/Hopper-v4_fs1_120.npz; ")
-    assert f"copy error MSE(a_t-1, a_t)/Var(a) = {bc_oh.copy_error(fast['actions'], fast['episode_starts']):.3f}" in line
+    out = capsys.readouterr().out
+    assert "demos: 120 steps from demos/Hopper-v4_fs1_120.npz; " in out
     assert meta["frame_skip"] == 1 and meta == meta_of(make_demos("Hopper-v4", 120, 1))
     native, meta = load_demos(bc_oh, num_demo_samples=120)
-    assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz; " in capsys.readouterr().out
+    native_out = capsys.readouterr().out
+    assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz; " in native_out
     assert not np.array_equal(native["observations"], fast["observations"])
-    assert bc_oh.copy_error(fast["actions"], fast["episode_starts"]) < bc_oh.copy_error(native["actions"], native["episode_starts"])
+    assert 0 < reported_copy_error(out) < reported_copy_error(native_out)
 
 
 def test_a_file_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):

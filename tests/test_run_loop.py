@@ -1,6 +1,7 @@
 """The seed loop every method file shares (bc_oh.run, copied into the others): a clean interrupt that stops every
 process of the job, one ETA for the whole job, the line that says which seeds train and which wait, distinct seeds,
 the summary's share of the expert, and the demo checks' messages."""
+import json
 import os
 import signal
 import subprocess
@@ -10,9 +11,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 import bc_oh
-from conftest import REPO_ROOT, assert_usage_error, link_experts, run_in_process
+from conftest import REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
 
 
 def live_processes(group: int) -> list:
@@ -60,28 +62,53 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
     assert stderr.strip().splitlines() == ["interrupted: seeds none finished and kept, 1, 2, 3 lost: the same command trains only those"]
 
 
-def test_the_eta_is_the_whole_jobs_from_every_seed(monkeypatch):
-    """3 seeds on 2 workers, each seed halfway after 10 s (so 20 s a seed): seeds 1 and 2 see their own 10 s left and
-    seed 3's 20 s after them; seed 3 sees only its own 10 s."""
-    args = bc_oh.Args(seeds=[1, 2, 3], workers=2)
-    monkeypatch.setattr(bc_oh.time, "time", lambda: 110.0)
-    assert [bc_oh.job_eta(args, seed, 100.0, 0.5) for seed in (1, 2, 3)] == ["job ETA 0.5 min"] * 2 + ["job ETA 0.2 min"]
-    args.workers = 1  # one at a time: seed 1 has two seeds after it
-    assert bc_oh.job_eta(args, 1, 100.0, 0.5) == "job ETA 0.8 min"
+def etas(monkeypatch, capsys, seeds, workers) -> dict:
+    """bc_oh.fit's printed job ETA (minutes) per seed at epoch 1 of 2, each seed halfway after 10 s (so 20 s a seed)."""
+    clock = [100.0]
+    monkeypatch.setattr(bc_oh.time, "time", lambda: clock[-1])
+    def train_step(idx):  # one step an epoch, 10 s each
+        clock.append(clock[-1] + 10.0)
+        return torch.tensor(0.0)
+    optimizer = torch.optim.Adam([torch.zeros(1, requires_grad=True)], lr=1e-3)
+    args, found = bc_oh.Args(seeds=seeds, workers=workers, epochs=2, batch_size=8), {}
+    for seed in seeds:
+        bc_oh.fit(args, None, optimizer, train_step, 8, seed, torch.device("cpu"), evaluate_policy=False)
+        first = capsys.readouterr().out.splitlines()[0]
+        assert first.startswith(f"seed {seed} | epoch 1/2 | ")
+        found[seed] = first.rsplit("| job ETA ", 1)[1]
+    return found
+
+
+def test_the_eta_is_the_whole_jobs_from_every_seed(monkeypatch, capsys):
+    """3 seeds on 2 workers: seeds 1 and 2 see their own 10 s left and seed 3's 20 s after them; seed 3 sees only its
+    own 10 s. One at a time, seed 1 has two seeds after it."""
+    assert etas(monkeypatch, capsys, [1, 2, 3], 2) == {1: "0.5 min", 2: "0.5 min", 3: "0.2 min"}
+    assert etas(monkeypatch, capsys, [1, 2, 3], 1)[1] == "0.8 min"
 
 
 def test_a_repeated_seed_is_refused():
     assert_usage_error(run_in_process("bc_oh.py", "--seeds", 1, 1), "--seeds needs distinct seeds, got 1 1")
 
 
-def test_the_share_of_the_expert_reads_as_a_share_at_the_runs_own_setting():
-    args = bc_oh.Args(frame_skip=4)
-    meta = {"expert_return": 3000.0, "expert_frame_skip": 4}
-    assert bc_oh.summary_line(args, [-1.0, 0.5], meta).endswith("over 2 seeds, 0% of the expert's 3000")  # not -0%
-    assert bc_oh.summary_line(args, [1500.0], meta) == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 1 seed, 50% of the expert's 3000"
-    args.frame_skip = 1  # a run at another rate than the expert's: said so
-    assert bc_oh.summary_line(args, [1500.0], meta).endswith("50% of the expert's 3000 at its own frame skip 4")
-    assert bc_oh.summary_line(args, [1500.0], {}) == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 1 seed"  # no expert recorded
+def summary(folder, monkeypatch, capsys, score, meta, **overrides) -> str:
+    """The last line bc_oh.run prints, on fake demos that carry `meta`, every evaluation returning `score`."""
+    path = folder / f"demos{len(list(folder.glob('demos*.npz')))}.npz"
+    np.savez(path, **fake_demos(256), **({"meta": np.array(json.dumps(meta))} if meta else {}))
+    skip_evaluation(monkeypatch, bc_oh, score)
+    bc_oh.run(tiny_args(bc_oh, demos=str(path), output_dir=str(path.with_suffix("")), **overrides))
+    return capsys.readouterr().out.splitlines()[-1]
+
+
+def test_the_share_of_the_expert_reads_as_a_share_at_the_runs_own_setting(tmp_path, monkeypatch, capsys):
+    meta = {"env_id": "Hopper-v4", "frame_skip": 4, "expert_return": 3000.0, "expert_frame_skip": 4}
+    line = summary(tmp_path, monkeypatch, capsys, -1.0, meta)
+    assert line == "Hopper-v4 bc_oh: -1.0 ± 0.0 over 1 seed, 0% of the expert's 3000"  # -0.0003: 0%, not -0%
+    line = summary(tmp_path, monkeypatch, capsys, 1500.0, meta, seeds=[1, 2])
+    assert line == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 2 seeds, 50% of the expert's 3000"
+    fast = {**meta, "frame_skip": 1}  # demos made at frame skip 1 by the expert of frame skip 4: said so
+    line = summary(tmp_path, monkeypatch, capsys, 1500.0, fast, frame_skip=1)
+    assert line.endswith("50% of the expert's 3000 at its own frame skip 4")
+    assert summary(tmp_path, monkeypatch, capsys, 1500.0, {}) == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 1 seed"  # no expert
 
 
 def write_demos(path, observations, actions, starts):

@@ -11,14 +11,14 @@ from conftest import REPO_ROOT
 FILES = [f"{name}.py" for name in file_sizes.TARGETS] + ["expert_ppo.py"]
 """the method files and the expert: what users copy"""
 CEILINGS = {
-    "bc_oh": 415,
-    "bc_so": 417,
-    "history_dropout": 425,
-    "c2f": 495,
-    "fca": 489,
-    "keyframe": 484,
-    "average_ensemble": 459,
-    "dagger": 535,
+    "bc_oh": 398,
+    "bc_so": 400,
+    "history_dropout": 408,
+    "c2f": 478,
+    "fca": 472,
+    "keyframe": 467,
+    "average_ensemble": 442,
+    "dagger": 518,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
 (file_sizes.TARGETS), never grow past this; lower a ceiling when a file shrinks"""
