@@ -173,7 +173,7 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 # ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
 def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
     for key in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
-        value, flag = getattr(args, key, None), f"--{key.replace('_', '-')}"  # before anything slow happens
+        value, flag = getattr(args, key, None), f"--{key.replace('_', '-')}"  # the flags every method shares
         require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
     require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
     seeds = " ".join(map(str, args.seeds)) or "none"
@@ -225,9 +225,9 @@ def run(args):  # check the input, load the demos, train each seed not yet finis
 
 def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     torch.set_num_threads(1)  # small networks gain nothing from more; first: a worker starts with all the cores
-    if multiprocessing.parent_process():  # a pool worker: Ctrl-C is the main process's, and each printed line is one
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # write (unbuffered, print's "\n" is a write apart)
-        sys.stdout.reconfigure(line_buffering=True, write_through=False)
+    if multiprocessing.parent_process():  # a pool worker: Ctrl-C is the main process's, a printed line one write
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, print's "\n" is a write apart
     print(f"seed {seed} | training", flush=True)
     result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
     score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
