@@ -166,8 +166,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             policy.eval()
             for name, member in {"ensemble": policy, **policy.members}.items():  # the members on the same episodes
                 returns = evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)
-                evaluated = evaluations if name == "ensemble" else member_evaluations[name]
-                evaluated.append((epoch, float(np.mean(returns))))
+                member_evaluations.get(name, evaluations).append((epoch, float(np.mean(returns))))  # or the ensemble's
             policy.train()
         if evaluating or epoch % max(1, args.epochs // 20) == 0:
             last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
@@ -423,8 +422,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def member_summary(per_seed: dict) -> dict:  # {member: {mean, std}} of each member's scores over the seeds
-    members = next(iter(per_seed.values()))["members"]
-    scores = {member: [entry["members"][member]["score"] for entry in per_seed.values()] for member in members}
+    scores = {m: [e["members"][m]["score"] for e in per_seed.values()] for m in [*per_seed.values()][0]["members"]}
     return {member: {"mean": float(np.mean(values)), "std": float(np.std(values))} for member, values in scores.items()}
 
 

@@ -17,7 +17,7 @@ CEILINGS = {
     "c2f": 478,
     "fca": 472,
     "keyframe": 467,
-    "average_ensemble": 442,
+    "average_ensemble": 440,
     "dagger": 518,
 }
 """formatted lines each method file had when issue 31's first part landed: a file may shrink towards its target
