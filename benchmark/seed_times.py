@@ -29,7 +29,8 @@ def machine_name(record: dict) -> str:
 
 def collect(results_dir) -> tuple:
     """({(run, machine): [ms per step of each seed]}, results without a machine record). A run is the folder above the
-    env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it."""
+    env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it, prefixed by the result's method
+    where the folder does not start with it."""
     times, unknown = defaultdict(list), 0
     for path in sorted(Path(results_dir).rglob("result_seeds*.json")):
         try:
@@ -46,7 +47,9 @@ def collect(results_dir) -> tuple:
         if not isinstance(result.get("machine"), dict):
             unknown += 1
             continue
-        times[path.parent.parent.name, machine_name(result["machine"])].append(ms)
+        run, method = path.parent.parent.name, str(result.get("method", ""))
+        run = run if run.startswith(method) else f"{method}/{run}"  # e.g. ensemble_twins/bc_so: its members' kind
+        times[run, machine_name(result["machine"])].append(ms)
     return dict(times), unknown
 
 

@@ -10,10 +10,10 @@ AMD = {"cpu": "AMD EPYC", "cpu_vendor": "AuthenticAMD", "cpu_capability": "AVX51
 XEON = {"cpu": "Intel(R) Xeon(R) Processor", "cpu_capability": "AVX512"}  # an older record: no vendor
 
 
-def write(folder, seed, ms, machine=None, seeds=None):
+def write(folder, seed, ms, machine=None, seeds=None, method=None):
     folder.mkdir(parents=True, exist_ok=True)
     scores = {str(s): {"score": 1.0, "evaluations": [[1, 1.0]], "ms_per_step": ms} for s in (seeds or [seed])}
-    result = {"env": "Hopper-v4", "method": "c2f", "args": {}, "scores": scores, "mean": 1.0, "std": 0.0}
+    result = {"env": "Hopper-v4", "method": method or folder.parent.name, "args": {}, "scores": scores, "mean": 1.0, "std": 0.0}
     if machine:
         result["machine"] = machine
     (folder / f"result_seeds{'-'.join(map(str, seeds or [seed]))}.json").write_text(json.dumps(result))
@@ -25,12 +25,13 @@ def test_times_are_grouped_by_run_and_machine_and_priced_at_a_hopper_seeds_steps
     write(tmp_path / "runs/c2f/Walker2d-v4", 1, 1.0, XEON)
     write(tmp_path / "runs/c2f/Walker2d-v4", 9, 1.0, XEON, seeds=[1, 9])  # a summary of two seeds: not counted again
     write(tmp_path / "regimes/x/runs/dagger/Hopper-v4", 1, 1.0, AMD)
+    write(tmp_path / "twins/runs/bc_so/Hopper-v4", 1, 3.0, AMD, method="ensemble_twins")  # named by method and folder
     write(tmp_path / "runs/bc_oh/Hopper-v4", 1, 1.0)  # no machine record: counted, left out
     write(tmp_path / "runs/bc_so/Hopper-v4", 1, "fast", AMD)  # not a number: skipped, not a traceback
     (tmp_path / "runs/bc_so/Hopper-v4/result_seeds2.json").write_text("{half")  # half written: skipped
     times, unknown = seed_times.collect(tmp_path)
     assert times == {("c2f", "AuthenticAMD AMD EPYC, AVX512"): [2.0, 4.0], ("c2f", "Intel(R) Xeon(R) Processor, AVX512"): [1.0],
-                     ("dagger", "AuthenticAMD AMD EPYC, AVX512"): [1.0]}
+                     ("dagger", "AuthenticAMD AMD EPYC, AVX512"): [1.0], ("ensemble_twins/bc_so", "AuthenticAMD AMD EPYC, AVX512"): [3.0]}
     assert unknown == 1
     rows = seed_times.table(times, unknown, "cmd").splitlines()
     assert "| `c2f` | AuthenticAMD AMD EPYC, AVX512 | 2 | 2.00–4.00 | 10.4–20.8 min |" in rows  # 312,000 steps
