@@ -96,15 +96,6 @@ class Normalizer(nn.Module):  # standardises inputs with statistics of the train
         return (x - self.mean) / self.std
 
 
-def authors_init(module: nn.Module):  # the authors' weights_init: Xavier-uniform Linear weights, BatchNorm N(1, 0.02^2)
-    if isinstance(module, nn.Linear):
-        nn.init.xavier_uniform_(module.weight)
-    elif isinstance(module, nn.BatchNorm1d):
-        nn.init.normal_(module.weight, 1.0, 0.02)
-    if isinstance(module, (nn.Linear, nn.BatchNorm1d)) and module.bias is not None:  # and zero biases
-        nn.init.zeros_(module.bias)
-
-
 class Policy(nn.Module):  # FCA: the authors' encoder G (history -> e), head F(e) -> a_t, adversary D(e, a_t) -> a_{t-1}
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, embedding_dim: int, inputs: torch.Tensor):
         super().__init__()
@@ -115,7 +106,13 @@ class Policy(nn.Module):  # FCA: the authors' encoder G (history -> e), head F(e
         self.encoder = nn.Sequential(*blocks, nn.Linear(hidden, embedding_dim))
         self.head = head(embedding_dim, act_dim, hidden)
         self.adversary = head(embedding_dim + act_dim, act_dim, hidden)  # conditioned on the true a_t
-        self.apply(authors_init)
+        for module in self.modules():  # the authors' weights_init: Xavier-uniform Linear, BatchNorm N(1, 0.02^2)
+            if isinstance(module, nn.Linear):
+                nn.init.xavier_uniform_(module.weight)
+            elif isinstance(module, nn.BatchNorm1d):
+                nn.init.normal_(module.weight, 1.0, 0.02)
+            if isinstance(module, (nn.Linear, nn.BatchNorm1d)) and module.bias is not None:  # and zero biases
+                nn.init.zeros_(module.bias)
 
     def embed(self, obs_history):
         return self.encoder(self.normalize(obs_history))

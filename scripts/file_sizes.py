@@ -3,6 +3,7 @@
     python scripts/file_sizes.py          # a markdown table
     python scripts/file_sizes.py --page   # also put it between the <!-- sizes --> markers of docs/contributing.md
     python scripts/file_sizes.py --budget bc_oh   # where one file's formatted lines go, by part (method, run, ...)
+    python scripts/file_sizes.py --features       # what each feature of the shared part costs every method file
 
 Lines = the file's lines once formatted by `ruff format --line-length 120` (so long lines cannot hide size; the
 method files are kept formatted, `tests/test_style.py`), characters likewise; diff = the lines
@@ -39,6 +40,53 @@ PARTS = {"run": ("run", "train_and_record", "run_name", "finished_seed", "write_
 method's (network, loss, training step, train_seed, fit; DAgger's expert); the rest (header, imports, banners, copy
 markers, the blank lines between definitions, `__main__`) is counted as such"""
 
+FEATURES = {
+    "--velocity-dims": [(r'^    velocity_dims: .*\n    """.*\n', ""), (r"^    if override:\n(?:        .*\n){2}", "")],
+    "the demos' copy error": [(r"^    (?:step_error|copy_error|shortcut) = .*\n", ""), (r"; \{shortcut\} \(near 0[^)]*\)", "")],
+    "the job's ETA": [(r"^    (?:workers, position|waves_after) = .*\n", ""), (r"^ +eta = .*\n", ""), (r" \| job ETA \{eta:\.1f\} min", "")],
+    "the share of the expert's return": [(r'^    if "expert_return" in meta:.*\n(?:        .*\n)+', "")],
+    "the hint for transposed demos": [(r"^    turned = .*\n", ""), (r"^    fix = .*\n", '    fix = "use demos of this env"\n')],
+    "the kept and waiting seeds' lines": [(r"^    if kept:\n        .*\n", ""), (r"^    if len\(to_train\) > args\.workers:\n(?:        .*\n)+", "")],
+    "the usage line of the docstring": [(r'\n\n    python bc_oh\.py --env Hopper-v4\n"""', '"""')],
+    "keeping finished seeds on a rerun": [(r"^def finished_seed(?:.*\n)*?(?=^def )", ""), (r"finished_seed\(output_dir, s(?:eed)?, args\)", "None")],
+    "a clean interrupt": [(r"^    try:\n((?:        .*\n)+)    except KeyboardInterrupt:.*\n(?:        .*\n)+", lambda m: re.sub("^    ", "", m[1], flags=re.M)),
+                          (r"^ +signal\.signal\(.*\n", ""), (r"^import signal\n", "")],
+    "run names that keep settings apart": [(r"^def run_name(?:.*\n)*?(?=^def )", ""), (r"run_name\(args\)", "METHOD")],
+    "the one-line refusals of bad flags and demos": [  # the require checks, their messages and their loops
+        (r'^    for key in (?:"history|\("observations", "actions").*\n(?:        (?:value, flag|require).*\n)+', ""),
+        (r'^    for key, values in \(\("observations".*\n(?:        .*\n){2}', ""), (r"^ +require\(.*\n", ""),
+        (r"^    (?:seeds|samples, batch|make|where|turned|fix|need|shapes|rows|batch|outside|bounds) \+?= .*\n", ""),
+        (r"^    low, high = env\.action_space.*\n", "")],
+}
+"""a feature of the shared part (the same in every method file) -> the edits of formatted bc_oh.py that take it out,
+(regular expression, replacement) each, applied in turn; --features measures what each saves, and all of them"""
+
+
+def feature_costs() -> dict:
+    """{feature: (formatted lines, characters)} that taking it out of bc_oh.py saves (so every method file: the shared
+    part is the same in each), and {"all of them": ...}; a UsageError if an edit no longer finds its text."""
+    text, costs = formatted("bc_oh"), {}
+    every = text
+    for feature, edits in FEATURES.items():
+        cut = text
+        for pattern, replacement in edits:
+            cut, found = re.subn(pattern, replacement, cut, flags=re.M)
+            every = re.sub(pattern, replacement, every, flags=re.M)
+            if not found:
+                raise UsageError(f"the edit {pattern!r} of {feature!r} finds nothing in bc_oh.py: update FEATURES")
+        costs[feature] = size(text, cut, feature)
+    costs["all of them"] = size(text, every, "all of them")
+    return costs
+
+
+def size(text: str, cut: str, feature: str) -> tuple:  # (formatted lines, characters) cut, formatted, has fewer
+    try:
+        ast.parse(cut)  # a cut that broke the file would measure nothing
+    except SyntaxError as error:
+        raise UsageError(f"the edits of {feature!r} leave bc_oh.py unparsable (line {error.lineno}): update FEATURES")
+    cut = format_text(cut)
+    return len(text.splitlines()) - len(cut.splitlines()), len(text) - len(cut)
+
 
 def budget(name: str) -> dict:
     """{part: formatted lines} of a method file, each definition counted from its first line (decorators included)
@@ -58,8 +106,12 @@ def budget(name: str) -> dict:
 
 def formatted(name: str) -> str:
     """The file as `ruff format --line-length 120` writes it."""
+    return format_text((ROOT / f"{name}.py").read_text())
+
+
+def format_text(source: str) -> str:
     try:
-        done = subprocess.run(["ruff", "format", "--line-length", "120", "-"], input=(ROOT / f"{name}.py").read_text(), capture_output=True, text=True, check=True)
+        done = subprocess.run(["ruff", "format", "--line-length", "120", "-"], input=source, capture_output=True, text=True, check=True)
     except FileNotFoundError:
         raise UsageError("ruff is not on PATH: pip install -r requirements.txt (it pins ruff), in the active venv")
     return done.stdout
@@ -87,7 +139,12 @@ def main(argv=None):
     parser = OneLineParser(prog="python scripts/file_sizes.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--page", type=Path, nargs="?", const=PAGE, help=f"also put the table between this page's (alone: {PAGE}) {' and '.join(MARKERS)} markers")
     parser.add_argument("--budget", choices=list(TARGETS), help="print instead where this file's formatted lines go, by part")
+    parser.add_argument("--features", action="store_true", help="print instead what each feature of the shared part costs")
     args = parser.parse_args(argv)
+    if args.features:
+        for feature, (lines, characters) in feature_costs().items():
+            print(f"{feature}: {lines} formatted lines, {characters} characters")
+        return 0
     if args.budget:
         parts = budget(args.budget)
         print(f"{args.budget}.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{part} {n}" for part, n in parts.items()))

@@ -1,5 +1,6 @@
 """scripts/file_sizes.py: the table of file lengths and diffs against bc_oh.py, and the contributors' page it goes into."""
 import file_sizes
+import pytest
 from conftest import REPO_ROOT, assert_usage_error, run_script
 
 
@@ -80,3 +81,29 @@ def test_without_ruff_it_says_so_in_one_line():
     result = run_script("scripts/file_sizes.py", env={"PATH": ""})
     assert_usage_error(result, "ruff is not on PATH: pip install -r requirements.txt")
     assert result.returncode == 2
+
+
+def test_each_feature_of_the_shared_part_has_a_cost_and_all_cost_the_most(capsys):
+    """--features: taking each feature out of bc_oh.py (so out of every method file) saves lines and characters."""
+    costs = file_sizes.feature_costs()
+    assert list(costs) == [*file_sizes.FEATURES, "all of them"]
+    assert all(lines > 0 and characters > 0 for lines, characters in costs.values())
+    every = costs.pop("all of them")
+    assert max(lines for lines, _ in costs.values()) < every[0] <= sum(lines for lines, _ in costs.values())
+    assert file_sizes.main(["--features"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0] == f"--velocity-dims: {costs['--velocity-dims'][0]} formatted lines, {costs['--velocity-dims'][1]} characters"
+    assert len(printed) == len(file_sizes.FEATURES) + 1 and printed[-1].startswith(f"all of them: {every[0]} formatted lines")
+
+
+def test_a_feature_cost_counts_the_formatted_lines_its_edits_take_out(tmp_path, monkeypatch):
+    (tmp_path / "bc_oh.py").write_text("def f():\n    x = 1\n    y = 2  # a feature\n    return x\n")
+    monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
+    monkeypatch.setattr(file_sizes, "FEATURES", {"y": [(r"^    y = .*\n", "")], "x": [(r"^    x = 1\n", ""), (r"return x", "return 1")]})
+    assert file_sizes.feature_costs() == {"y": (1, 23), "x": (1, 10), "all of them": (2, 33)}
+    monkeypatch.setattr(file_sizes, "FEATURES", {"gone": [(r"^    z = .*\n", "")]})
+    with pytest.raises(file_sizes.UsageError, match="the edit .* of 'gone' finds nothing in bc_oh.py: update FEATURES"):
+        file_sizes.feature_costs()
+    monkeypatch.setattr(file_sizes, "FEATURES", {"broken": [(r"^    return x\n", "    return (\n")]})
+    with pytest.raises(file_sizes.UsageError, match="the edits of 'broken' leave bc_oh.py unparsable"):
+        file_sizes.feature_costs()

@@ -15,7 +15,7 @@ CEILINGS = {
     "bc_so": 400,
     "history_dropout": 408,
     "c2f": 478,
-    "fca": 472,
+    "fca": 469,
     "keyframe": 467,
     "average_ensemble": 440,
     "dagger": 518,
