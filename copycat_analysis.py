@@ -168,9 +168,7 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 
 
 # Copied from expert_ppo.generate_demos
-def generate_demos(
-    env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0
-) -> dict:
+def generate_demos(env_id: str, frame_skip: int | None, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
     Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
     step's reward, termination and truncation, and each episode's observation after its last step."""
@@ -200,8 +198,7 @@ def generate_demos(
 
 
 # Copied from expert_ppo.write_atomically
-def write_atomically(path: str, write):
-    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+def write_atomically(path: str, write):  # write(file) to a temporary file, then rename: never half a file
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:

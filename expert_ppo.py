@@ -19,7 +19,6 @@ import re
 import sys
 import time
 from dataclasses import asdict, dataclass
-from typing import Optional
 
 import gymnasium as gym
 import mujoco
@@ -37,7 +36,7 @@ mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoC
 class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id with continuous actions (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
-    frame_skip: Optional[int] = None
+    frame_skip: int | None = None
     """simulator steps per action; None: the env's own (time limit and rewards rescaled: docs/methods.md)"""
     seed: int = 1
     """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed"""
@@ -87,22 +86,21 @@ class Args:
     """checkpoint evaluated by --eval-only, at the frame skip it was trained at unless --frame-skip is given"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
-    ship_to: Optional[str] = None
+    ship_to: str | None = None
     """with --eval-only: also write the checkpoint, with its evaluated return recorded, to this path"""
     make_demos: bool = False
     """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the demonstrations the imitation files load"""
-    num_demo_samples: Optional[int] = None
+    num_demo_samples: int | None = None
     """with --make-demos: demonstration steps; None: the paper's 20000 for Hopper and 10000 otherwise"""
     retarget: bool = False
     """with --eval-only: --checkpoint may be an expert for another version of --env (Hopper-v4 for Hopper-v5)"""
 
 
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
 # ---- Env ----
-# Copied from bc_oh.require
+# Copied from bc_oh.UsageError..require
+class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
+
+
 def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
@@ -124,7 +122,7 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
 
 
-def env_frame_skip(env_id: str, frame_skip: Optional[int] = None) -> Optional[int]:  # None: not a MuJoCo env
+def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:  # None: not a MuJoCo env
     """The frame skip of make_env(env_id, frame_skip), from one env made: bad input fails here, before any work."""
     if frame_skip is not None and frame_skip <= 0:  # make_env would divide by it, or make a negative time limit
         raise UsageError(f"--frame-skip must be positive, got {frame_skip}: e.g. 1, or leave it out for the env's own")
@@ -224,8 +222,7 @@ def machine() -> dict:  # where a result was made: the same command, kind of CPU
     }
 
 
-def write_atomically(path: str, write):
-    """Call write(file) on a temporary file, then rename: an interrupted run leaves no half file."""
+def write_atomically(path: str, write):  # write(file) to a temporary file, then rename: never half a file
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
@@ -242,7 +239,7 @@ def save_atomically(obj, path: str):  # torch.save through write_atomically: nev
 
 
 # ---- Evaluation ----
-def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_skip: Optional[int] = None) -> list:
+def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_skip: int | None = None) -> list:
     """Returns of `episodes` episodes of the deterministic policy, one env, seeds seed, seed+1, ..."""
     env, returns = make_env(env_id, frame_skip), []
     for episode in range(episodes):
@@ -270,7 +267,7 @@ def retargeted_expert(path: str, env_id: str):  # --retarget: (the expert at pat
     return policy, made_for
 
 
-def checkpoint_env(path: str) -> Optional[str]:  # the env it was made for; None: unreadable (load_expert says why)
+def checkpoint_env(path: str) -> str | None:  # the env it was made for; None: unreadable (load_expert says why)
     try:
         return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
     except Exception:
@@ -284,11 +281,9 @@ def eval_only(args: Args):
         env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
     recorded = checkpoint_env(path)
-    if not args.retarget and recorded not in (None, args.env) and recorded.split("-")[0] == args.env.split("-")[0]:
-        raise UsageError(
-            f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} "
-            f"(and --ship-to to ship it there), or a checkpoint made for {args.env}"
-        )
+    other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} (and"
+    other += f" --ship-to to ship it there), or a checkpoint made for {args.env}"
+    require(args.retarget or recorded in (None, args.env) or recorded.split("-")[0] != args.env.split("-")[0], other)
     # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
     policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
@@ -298,9 +293,8 @@ def eval_only(args: Args):
     there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
     require(not args.ship_to or frame_skip == trained_at, f"{there}, drop --frame-skip {frame_skip} or --ship-to")
     if frame_skip != native:  # said only at another rate, so that the default output stays as it was
-        print(
-            f"evaluating at frame skip {frame_skip} (the env's own is {native}; the expert was trained at {trained_at})"
-        )
+        rates = f"the env's own is {native}; the expert was trained at {trained_at}"
+        print(f"evaluating at frame skip {frame_skip} ({rates})")
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
@@ -315,9 +309,7 @@ def eval_only(args: Args):
 
 
 # ---- Demonstrations (--make-demos): the imitation files' input ----
-def generate_demos(
-    env_id: str, frame_skip: Optional[int], expert: ExpertPolicy, num_samples: int, seed: int = 0
-) -> dict:
+def generate_demos(env_id: str, frame_skip: int | None, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
     """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
     Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
     step's reward, termination and truncation, and each episode's observation after its last step."""
@@ -397,8 +389,8 @@ def validate(args: Args):  # `not value > 0` also refuses a NaN float
     for name in positive.split():
         require(getattr(args, name) > 0, f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     require(0 < args.gamma <= 1 and 0 <= args.gae_lambda <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
-    if (args.num_envs * args.num_steps) % args.num_minibatches:
-        raise UsageError("--num-minibatches must divide num-envs * num-steps")
+    divides = (args.num_envs * args.num_steps) % args.num_minibatches == 0
+    require(divides, "--num-minibatches must divide num-envs * num-steps")
 
 
 def train(args: Args):
@@ -433,8 +425,8 @@ def train(args: Args):
             trained_on = state["env_id"]
         except Exception as error:
             raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
-        if trained_on != args.env:
-            raise UsageError(f"{latest_path} was trained on {trained_on}, not {args.env}: use another --output-dir")
+        other = f"{latest_path} was trained on {trained_on}, not {args.env}"
+        require(trained_on == args.env, f"{other}: use another --output-dir")
         # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
         rate = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
@@ -580,9 +572,8 @@ def train(args: Args):
     save_atomically(checkpoint(), latest_path)
     envs.close()
     if global_step < args.total_timesteps:  # stopped by --max-minutes
-        print(
-            f"stopped after {args.max_minutes} min at step {global_step}: continue with the same command and --resume"
-        )
+        stopped = f"stopped after {args.max_minutes} min at step {global_step}"
+        print(f"{stopped}: continue with the same command and --resume")
         return
     returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip)
     save_atomically(checkpoint(float(np.mean(returns))), latest_path)
