@@ -1,13 +1,12 @@
-# PPO expert that produces the demonstrations (paper section 5.1, "Data collection"); see README.md
+# PPO expert that makes the demonstrations (paper section 5.1, "Data collection"); see README.md
 """Proximal Policy Optimisation for gymnasium 1.x MuJoCo envs, CleanRL style, in one file.
 
-Train:     python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
-Resume:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
-Evaluate:  python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
-Demos:     python expert_ppo.py --env Hopper-v4 --make-demos   (demos/Hopper-v4_20000.npz: the imitation files' input)
-Other rate: python expert_ppo.py --env Hopper-v4 --frame-skip 1   (writes runs/expert_ppo/Hopper-v4__1_fs1)
+Train:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
+Resume:   python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
+Evaluate: python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
+Demos:    python expert_ppo.py --env Hopper-v4 --make-demos   (the imitation files' input)
 
-A checkpoint is a dict of tensors and numbers (experts/README.md); the imitation files copy ExpertPolicy, load_expert.
+A checkpoint is a dict of tensors and numbers (experts/README.md).
 """
 
 import hashlib
@@ -27,17 +26,26 @@ import torch
 import torch.nn as nn
 import tyro
 
-gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# MuJoCo 3.x warns of gymnasium's HalfCheetah XML (to ./MUJOCO_LOG.TXT too) each time it is made: drop that one
-mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
+
+
+def print_mujoco_warning(text: str):
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah XML each time that env is made (and writes it
+    # to ./MUJOCO_LOG.TXT): drop that warning and print any other.
+    if "settotalmass" not in text:
+        print(f"MuJoCo warning: {text}", file=sys.stderr)
+
+
+mujoco.set_mju_user_warning(print_mujoco_warning)
 
 
 @dataclass
 class Args:
     env: str = "Hopper-v4"
-    """gymnasium MuJoCo env id with continuous actions (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: int | None = None
-    """simulator steps per action; None: the env's own (time limit and rewards rescaled: docs/methods.md)"""
+    """simulator steps per action; None: the env's own (see docs/methods.md)"""
     seed: int = 1
     """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed"""
     total_timesteps: int = 3_000_000
@@ -67,7 +75,7 @@ class Args:
     hidden: int = 64
     """width of the two tanh hidden layers of actor and critic"""
     output_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
-    """where training writes latest.pt (to resume) and best.pt; {rate}: _fsK at --frame-skip K, else empty"""
+    """where training writes latest.pt and best.pt; {rate} is _fsK at --frame-skip K"""
     save_every_steps: int = 100_000
     """write latest.pt every this many env steps"""
     eval_every_steps: int = 250_000
@@ -79,29 +87,33 @@ class Args:
     max_minutes: float = 0.0
     """stop cleanly (checkpoint written) after this many minutes; 0 = no limit. Resume later."""
     threads: int = 1
-    """torch CPU threads; 1 is fastest for these small networks and lets several runs share a machine"""
+    """torch CPU threads; 1 is fastest for these small networks"""
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """checkpoint evaluated by --eval-only, at the frame skip it was trained at unless --frame-skip is given"""
+    """checkpoint of --eval-only and --make-demos, run at the frame skip it was trained at"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
-    """with --eval-only: also write the checkpoint, with its evaluated return recorded, to this path"""
+    """with --eval-only: also write the checkpoint, with its evaluated return, to this path"""
     make_demos: bool = False
-    """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the demonstrations the imitation files load"""
+    """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the imitation files' demos"""
     num_demo_samples: int | None = None
-    """with --make-demos: demonstration steps; None: the paper's 20000 for Hopper and 10000 otherwise"""
+    """with --make-demos: demo steps; None: the paper's 20000 for Hopper, 10000 otherwise"""
     retarget: bool = False
-    """with --eval-only: --checkpoint may be an expert for another version of --env (Hopper-v4 for Hopper-v5)"""
+    """with --eval-only: --checkpoint may be made for another version of --env (v4 for v5)"""
 
 
 # ---- Env ----
 # Copied from bc_oh.UsageError..require
-class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
+class UsageError(
+    Exception
+): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
 
 
-def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
+def require(
+    condition, message: str
+):  # refuse bad input in one line: a UsageError unless condition holds
     if not condition:
         raise UsageError(message)
 
@@ -111,37 +123,64 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     try:
         env = gym.make(env_id)
     except Exception as error:  # gymnasium raises several error types for unknown or broken ids
-        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
+        raise UsageError(
+            f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4"
+        )
     kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
     require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
     if frame_skip is None or frame_skip == native:
         return env
-    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # the same time
-    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
+    require(
+        native is not None,
+        f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out",
+    )
+    env = gym.make(
+        env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip)
+    )  # the same time
+    env.unwrapped.frame_skip = (
+        frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
+    )
+    return gym.wrappers.TransformReward(
+        env, lambda reward: reward * frame_skip / native
+    )  # and the same return scale
 
 
-def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:  # None: not a MuJoCo env
-    """The frame skip of make_env(env_id, frame_skip), from one env made: bad input fails here, before any work."""
-    if frame_skip is not None and frame_skip <= 0:  # make_env would divide by it, or make a negative time limit
-        raise UsageError(f"--frame-skip must be positive, got {frame_skip}: e.g. 1, or leave it out for the env's own")
+def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:
+    """The frame skip of make_env(env_id, frame_skip); None for an env that is not MuJoCo.
+    It makes one env, so that bad input fails here, before any work."""
+    # make_env would divide by it, or make a negative time limit.
+    if frame_skip is not None and frame_skip <= 0:
+        raise UsageError(
+            f"--frame-skip must be positive, got {frame_skip}: "
+            "e.g. 1, or leave it out for the env's own"
+        )
     env = make_env(env_id, frame_skip)
-    resolved = getattr(env.unwrapped, "frame_skip", None)  # make_env set it to frame_skip when one was given
+    # make_env set it to frame_skip when one was given.
+    resolved = getattr(env.unwrapped, "frame_skip", None)
     env.close()
     return resolved
 
 
-class RunningMeanStd:  # running mean and variance (parallel algorithm of Chan et al.), as gymnasium's normalisers
+class RunningMeanStd:
+    """Running mean and variance (the parallel algorithm of Chan et al.), as in gymnasium's
+    observation and reward normalisers."""
+
     def __init__(self, shape=()):
-        self.mean, self.var, self.count = np.zeros(shape), np.ones(shape), 1e-4
+        self.mean = np.zeros(shape)
+        self.var = np.ones(shape)
+        self.count = 1e-4
 
     def update(self, batch: np.ndarray):
-        batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
-        delta, total = batch_mean - self.mean, self.count + batch_count
+        batch_mean = batch.mean(0)
+        batch_var = batch.var(0)
+        batch_count = batch.shape[0]
+        delta = batch_mean - self.mean
+        total = self.count + batch_count
         self.mean = self.mean + delta * batch_count / total
-        sum_of_squares = self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total
-        self.var = sum_of_squares / total
+        old_sum = self.var * self.count
+        batch_sum = batch_var * batch_count
+        correction = delta**2 * self.count * batch_count / total
+        self.var = (old_sum + batch_sum + correction) / total
         self.count = total
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
@@ -149,12 +188,15 @@ class RunningMeanStd:  # running mean and variance (parallel algorithm of Chan e
 
 
 # ---- Networks ----
-def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:  # tanh layers, Huang et al.'s init
-    layers = [nn.Linear(in_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, out_dim)]
-    for layer, std in zip(layers[::2], (np.sqrt(2), np.sqrt(2), last_std)):
+def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:
+    """Two tanh hidden layers with orthogonal init, as in Huang et al.'s PPO details."""
+    first = nn.Linear(in_dim, hidden)
+    second = nn.Linear(hidden, hidden)
+    last = nn.Linear(hidden, out_dim)
+    for layer, std in ((first, np.sqrt(2)), (second, np.sqrt(2)), (last, last_std)):
         nn.init.orthogonal_(layer.weight, std)
         nn.init.zeros_(layer.bias)
-    return nn.Sequential(*layers)
+    return nn.Sequential(first, nn.Tanh(), second, nn.Tanh(), last)
 
 
 class Agent(nn.Module):
@@ -169,52 +211,72 @@ class Agent(nn.Module):
 
     def action_and_value(self, obs, action=None):
         mean = self.actor_mean(obs)
-        dist = torch.distributions.Normal(mean, self.actor_logstd.expand_as(mean).exp())
+        std = self.actor_logstd.expand_as(mean).exp()
+        dist = torch.distributions.Normal(mean, std)
         if action is None:
             action = dist.sample()
         return action, dist.log_prob(action).sum(-1), dist.entropy().sum(-1), self.value(obs)
 
 
 class ExpertPolicy(nn.Module):
-    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+    """The deterministic expert: frozen obs normalisation, the actor's mean action, clipped."""
 
     def __init__(self, checkpoint: dict):
         super().__init__()
-        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        hidden_layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
-        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))  # the actor's mean, as Agent's
+        obs_dim = checkpoint["obs_shape"][0]
+        act_dim = checkpoint["action_shape"][0]
+        hidden = checkpoint["hidden"]
+        # The actor's mean, as in Agent.
+        hidden_layers = [
+            nn.Linear(obs_dim, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, hidden),
+            nn.Tanh(),
+        ]
+        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[..., : len(self.obs_mean)]  # an expert re-targeted to a wider observation (Ant-v5's) reads its start
-        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
-        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+        # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
+        obs = obs[..., : len(self.obs_mean)]
+        obs = (obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)
+        obs = obs.clamp(-10.0, 10.0)
+        action = self.net(obs)
+        return torch.maximum(torch.minimum(action, self.action_high), self.action_low)
 
 
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
     train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
     require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
+        policy = ExpertPolicy(checkpoint)
+        trained_on = checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy or re-train it")
-    require(trained_on == env_id, f"{path} is an expert for {trained_on}, not {env_id}: pass the one made for {env_id}")
+        problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
+        raise UsageError(f"{problem}: re-copy or re-train it")
+    other = f"{path} is an expert for {trained_on}, not {env_id}"
+    require(trained_on == env_id, f"{other}: pass the one made for {env_id}")
     return policy.eval()
 
 
 # ---- Checkpoints ----
-def machine() -> dict:  # where a result was made: the same command, kind of CPU and versions give the same digits
-    cpus = open("/proc/cpuinfo").read() if os.path.isfile("/proc/cpuinfo") else ""
+def machine() -> dict:
+    """Where a result was made: the same command, kind of CPU and versions give the same digits."""
+    cpus = ""
+    if os.path.isfile("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as file:
+            cpus = file.read()
     cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
     return {
         "cpu": cpu[1] if cpu else platform.processor(),
         "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-        **{name: os.environ.get(name) for name in ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS")},
+        "MKL_CBWR": os.environ.get("MKL_CBWR"),
+        "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
         "torch": str(torch.__version__),
         "numpy": np.__version__,
         "mujoco": mujoco.__version__,
@@ -222,106 +284,145 @@ def machine() -> dict:  # where a result was made: the same command, kind of CPU
     }
 
 
-def write_atomically(path: str, write):  # write(file) to a temporary file, then rename: never half a file
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename it to path: never half a file."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
         with open(tmp, "wb") as file:
             write(file)
         os.replace(tmp, path)
-    finally:  # after an interruption, remove the half-written temporary file
+    finally:
+        # After an interruption, remove the half-written temporary file.
         if os.path.exists(tmp):
             os.remove(tmp)
 
 
-def save_atomically(obj, path: str):  # torch.save through write_atomically: never half a checkpoint
+def save_atomically(obj, path: str):
+    """torch.save through write_atomically: never half a checkpoint."""
     write_atomically(path, lambda file: torch.save(obj, file))
 
 
 # ---- Evaluation ----
-def evaluate(policy: ExpertPolicy, env_id: str, episodes: int, seed: int, frame_skip: int | None = None) -> list:
-    """Returns of `episodes` episodes of the deterministic policy, one env, seeds seed, seed+1, ..."""
-    env, returns = make_env(env_id, frame_skip), []
+def evaluate(policy, env_id: str, episodes: int, seed: int, frame_skip: int | None = None) -> list:
+    """The returns of the deterministic policy, one episode each of seeds seed, seed+1, ..."""
+    env = make_env(env_id, frame_skip)
+    returns = []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
         done, total = False, 0.0
         while not done:
             action = policy(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
             obs, reward, terminated, truncated, _ = env.step(action)
-            total, done = total + float(reward), terminated or truncated
+            total = total + float(reward)
+            done = terminated or truncated
         returns.append(total)
     env.close()
     return returns
 
 
-def retargeted_expert(path: str, env_id: str):  # --retarget: (the expert at path, the env it was made for)
-    """Refused unless made for another version of env_id (Hopper-v4 for Hopper-v5) with the same action shape and the
-    same observation, or one that is its leading positions and velocities (Ant-v4's 27 entries of Ant-v5's 105)."""
-    made_for = checkpoint_env(path) or env_id  # an unreadable file: load_expert says what is wrong with it
-    policy, env = load_expert(path, made_for), make_env(env_id)
-    structure = getattr(env.unwrapped, "observation_structure", {})
-    observations = (env.observation_space.shape[0], structure.get("qpos", 0) + structure.get("qvel", 0))
-    shapes = policy.net[0].in_features in observations and policy.net[-1].out_features == env.action_space.shape[0]
-    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s: train one for {env_id}"
-    require(made_for.split("-")[0] == env_id.split("-")[0] and shapes, other)
-    return policy, made_for
-
-
-def checkpoint_env(path: str) -> str | None:  # the env it was made for; None: unreadable (load_expert says why)
+def checkpoint_env(path: str) -> str | None:
+    """The env the checkpoint at path was made for; None if unreadable (load_expert says why)."""
     try:
         return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
     except Exception:
         return None
 
 
+def retargeted_expert(path: str, env_id: str):
+    """--retarget: the expert at path and the env it was made for. Refused unless that is another
+    version of env_id (Hopper-v4 for Hopper-v5) with the same action shape and observation, or one
+    that is its leading positions and velocities (Ant-v4's 27 entries of Ant-v5's 105)."""
+    # For an unreadable file, load_expert says what is wrong with it.
+    made_for = checkpoint_env(path) or env_id
+    policy = load_expert(path, made_for)
+    env = make_env(env_id)
+    structure = getattr(env.unwrapped, "observation_structure", {})
+    positions_and_velocities = structure.get("qpos", 0) + structure.get("qvel", 0)
+    observations = (env.observation_space.shape[0], positions_and_velocities)
+    same_input = policy.net[0].in_features in observations
+    same_output = policy.net[-1].out_features == env.action_space.shape[0]
+    same_family = made_for.split("-")[0] == env_id.split("-")[0]
+    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s"
+    require(same_family and same_input and same_output, f"{other}: train one for {env_id}")
+    return policy, made_for
+
+
 def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
     native = env_frame_skip(args.env)
     if args.frame_skip is not None:
-        env_frame_skip(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
+        # Fail early for a frame skip the env cannot take.
+        env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
+    # An expert for another version of --env (Hopper-v4 for Hopper-v5) needs --retarget.
     recorded = checkpoint_env(path)
-    other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it on {args.env} (and"
-    other += f" --ship-to to ship it there), or a checkpoint made for {args.env}"
-    require(args.retarget or recorded in (None, args.env) or recorded.split("-")[0] != args.env.split("-")[0], other)
-    # load_expert checks that the file is a readable checkpoint made for --env (with --retarget: for its family)
-    policy, made_for = retargeted_expert(path, args.env) if args.retarget else (load_expert(path, args.env), args.env)
+    same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
+    if same_family and recorded != args.env and not args.retarget:
+        raise UsageError(
+            f"{path} is an expert for {recorded}, not {args.env}: "
+            f"pass --retarget to evaluate it on {args.env} (and --ship-to to ship it there), "
+            f"or a checkpoint made for {args.env}"
+        )
+    # load_expert checks that the file is a readable checkpoint made for --env
+    # (with --retarget: for its family).
+    if args.retarget:
+        policy, made_for = retargeted_expert(path, args.env)
+    else:
+        policy = load_expert(path, args.env)
+        made_for = args.env
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-    # a policy acts well at the rate it was trained at: evaluate there unless told otherwise
-    trained_at = checkpoint.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
+    # A policy acts well at the rate it was trained at: evaluate there unless told otherwise.
+    # Checkpoints without the record were trained at the env's own rate.
+    trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
-    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
-    require(not args.ship_to or frame_skip == trained_at, f"{there}, drop --frame-skip {frame_skip} or --ship-to")
-    if frame_skip != native:  # said only at another rate, so that the default output stays as it was
+    if args.ship_to and frame_skip != trained_at:
+        raise UsageError(
+            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, "
+            f"drop --frame-skip {frame_skip} or --ship-to"
+        )
+    # Said only at another rate, so that the default output stays as it was.
+    if frame_skip != native:
         rates = f"the env's own is {native}; the expert was trained at {trained_at}"
         print(f"evaluating at frame skip {frame_skip} ({rates})")
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
-    if args.ship_to:  # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with
-        mean, std = float(np.mean(returns)), float(np.std(returns))
-        checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
-        if made_for != args.env:  # shipped for --env: load_expert accepts it there, and it says where it came from
-            checkpoint.update(env_id=args.env, retargeted_from=made_for)
+    mean = float(np.mean(returns))
+    std = float(np.std(returns))
+    if args.ship_to:
+        # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
+        checkpoint["eval_return"] = mean
+        checkpoint["eval_std"] = std
+        checkpoint["eval_episodes"] = len(returns)
+        if made_for != args.env:
+            # Shipped for --env: load_expert accepts it there, and it says where it came from.
+            checkpoint["env_id"] = args.env
+            checkpoint["retargeted_from"] = made_for
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
-    print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
+    print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 
-# ---- Demonstrations (--make-demos): the imitation files' input ----
-def generate_demos(env_id: str, frame_skip: int | None, expert: ExpertPolicy, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert on the clean env; episodes cut by the budget end early (truncated).
-    Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs: each
-    step's reward, termination and truncation, and each episode's observation after its last step."""
-    env, steps, final_observations = make_env(env_id, frame_skip), [], []
+# ---- Demonstrations (--make-demos): the input of the imitation files ----
+def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert on the clean env; the budget truncates the last episode.
+    Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs:
+    each step's reward, termination and truncation, and each episode's last observation."""
+    env = make_env(env_id, frame_skip)
+    steps = []
+    final_observations = []
     obs, _ = env.reset(seed=seed)
     start = True
     for step in range(num_samples):
         action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
         next_obs, reward, terminated, truncated, _ = env.step(action)
-        truncated = truncated or step == num_samples - 1  # the budget ends the last episode
+        # The budget ends the last episode.
+        if step == num_samples - 1:
+            truncated = True
         steps.append((obs, action, start, reward, terminated, truncated))
-        obs, start = next_obs, terminated or truncated
+        obs = next_obs
+        start = terminated or truncated
         if start:
             final_observations.append(next_obs)
             obs, _ = env.reset()
@@ -340,18 +441,26 @@ def generate_demos(env_id: str, frame_skip: int | None, expert: ExpertPolicy, nu
 
 def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
     """Where --make-demos writes, and where the imitation files look when --demos is not given."""
-    return f"demos/{env_id}{'' if frame_skip == native else f'_fs{frame_skip}'}_{num_samples}.npz"
+    rate = ""
+    if frame_skip != native:
+        rate = f"_fs{frame_skip}"
+    return f"demos/{env_id}{rate}_{num_samples}.npz"
 
 
-def make_demos(args: Args):  # a file already made from the same expert file with the same settings is kept
-    """Roll the expert out (seed 0, one thread: the arrays the imitation files made before they only loaded them) into
-    demos/, with a meta that names the expert (its SHA-256) and its return."""
-    native, frame_skip = env_frame_skip(args.env), env_frame_skip(args.env, args.frame_skip)
-    default = 20000 if args.env.startswith("Hopper") else 10000
-    num_samples = default if args.num_demo_samples is None else args.num_demo_samples
+def make_demos(args: Args):
+    """Roll the expert out into demos/, with a meta naming the expert (its SHA-256) and its return.
+    A file made from the same expert file with the same settings is kept."""
+    native = env_frame_skip(args.env)
+    frame_skip = env_frame_skip(args.env, args.frame_skip)
+    # The paper's sample counts: 20000 for Hopper, 10000 for the other envs.
+    num_samples = args.num_demo_samples
+    if num_samples is None:
+        num_samples = 20000 if args.env.startswith("Hopper") else 10000
     require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
-    expert_path, path = args.checkpoint.format(env=args.env), demo_path(args.env, frame_skip, native, num_samples)
-    expert = load_expert(expert_path, args.env)  # one clear line for a missing or wrong checkpoint
+    expert_path = args.checkpoint.format(env=args.env)
+    path = demo_path(args.env, frame_skip, native, num_samples)
+    # One clear line for a missing or wrong checkpoint.
+    expert = load_expert(expert_path, args.env)
     with open(expert_path, "rb") as file:
         expert_sha256 = hashlib.sha256(file.read()).hexdigest()
     checkpoint = torch.load(expert_path, map_location="cpu", weights_only=True)
@@ -368,14 +477,19 @@ def make_demos(args: Args):  # a file already made from the same expert file wit
     try:
         with np.load(path, allow_pickle=False) as data:
             made = json.loads(str(data["meta"]))
-    except Exception:  # none yet, or not one of ours: make it
+    except Exception:
+        # None yet, or not one of ours: make it.
         made = {}
-    if all(made.get(key) == meta[key] for key in ("env_id", "expert_sha256", "num_samples", "frame_skip")):
+    settings = ("env_id", "expert_sha256", "num_samples", "frame_skip")
+    if all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    if meta["expert_return"] is None:  # an expert not shipped with --eval-only --ship-to: no return to compare with
-        del meta["expert_return"], meta["expert_frame_skip"]
-    torch.set_num_threads(1)  # as the imitation files rolled it out: the same digits
+    # An expert not shipped with --eval-only --ship-to has no return to compare with.
+    if meta["expert_return"] is None:
+        del meta["expert_return"]
+        del meta["expert_frame_skip"]
+    # One thread, as the imitation files rolled the expert out: the same digits.
+    torch.set_num_threads(1)
     print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
     demos = generate_demos(args.env, frame_skip, expert, num_samples)
     write_atomically(path, lambda file: np.savez(file, meta=np.array(json.dumps(meta)), **demos))
@@ -383,12 +497,17 @@ def make_demos(args: Args):  # a file already made from the same expert file wit
 
 
 # ---- Training ----
-def validate(args: Args):  # `not value > 0` also refuses a NaN float
-    positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden save_every_steps"
-    positive += " eval_every_steps train_eval_episodes eval_episodes threads learning_rate clip_coef max_grad_norm"
+def validate(args: Args):
+    # `not value > 0` also refuses a NaN.
+    positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden"
+    positive += " save_every_steps eval_every_steps train_eval_episodes eval_episodes threads"
+    positive += " learning_rate clip_coef max_grad_norm"
     for name in positive.split():
-        require(getattr(args, name) > 0, f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    require(0 < args.gamma <= 1 and 0 <= args.gae_lambda <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
+        value = getattr(args, name)
+        flag = "--" + name.replace("_", "-")
+        require(value > 0, f"{flag} must be positive, got {value}")
+    require(0 < args.gamma <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
+    require(0 <= args.gae_lambda <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
     divides = (args.num_envs * args.num_steps) % args.num_minibatches == 0
     require(divides, "--num-minibatches must divide num-envs * num-steps")
 
@@ -396,63 +515,83 @@ def validate(args: Args):  # `not value > 0` also refuses a NaN float
 def train(args: Args):
     validate(args)
     native = env_frame_skip(args.env)
-    # resolved first, so that args and checkpoints record the rate used; at the env's own, make_env is gym.make(env)
+    # Resolved first, so that args and checkpoints record the rate used.
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
-    rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
+    rate = ""
+    if args.frame_skip != native:
+        rate = f"_fs{args.frame_skip}"
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
-    latest_path, best_path = os.path.join(output_dir, "latest.pt"), os.path.join(output_dir, "best.pt")
+    latest_path = os.path.join(output_dir, "latest.pt")
+    best_path = os.path.join(output_dir, "best.pt")
     random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
 
-    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the last one in
-    # info["final_obs"]: every stored transition belongs to one episode; a truncated one bootstraps from V(final_obs)
+    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the
+    # last one in info["final_obs"]. So every stored transition belongs to one episode, and a
+    # truncated episode bootstraps from V(final_obs).
     envs = gym.vector.SyncVectorEnv(
         [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
-    obs_dim, act_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
-    action_low, action_high = envs.single_action_space.low, envs.single_action_space.high
+    obs_dim = envs.single_observation_space.shape[0]
+    act_dim = envs.single_action_space.shape[0]
+    action_low = envs.single_action_space.low
+    action_high = envs.single_action_space.high
     agent = Agent(obs_dim, act_dim, args.hidden)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
-    obs_rms, ret_rms = RunningMeanStd((obs_dim,)), RunningMeanStd()
-    global_step, best_return = 0, -np.inf
+    obs_rms = RunningMeanStd((obs_dim,))
+    ret_rms = RunningMeanStd()
+    global_step = 0
+    best_return = -np.inf
 
     if args.resume and os.path.isfile(latest_path):
+        cannot_resume = f"cannot resume from {latest_path}"
         try:
             state = torch.load(latest_path, map_location="cpu", weights_only=True)
             trained_on = state["env_id"]
         except Exception as error:
-            raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
+            name = type(error).__name__
+            raise UsageError(f"{cannot_resume} ({name}): delete it or drop --resume")
         other = f"{latest_path} was trained on {trained_on}, not {args.env}"
         require(trained_on == args.env, f"{other}: use another --output-dir")
-        # Another rate is another task (other dynamics per action, other horizon): continuing would mix them.
-        trained_at = state.get("frame_skip", native)  # checkpoints without the record were trained at the env's own
+        # Another rate is another task (other dynamics per action, other horizon): continuing
+        # would mix them. Checkpoints without the record were trained at the env's own rate.
+        trained_at = state.get("frame_skip", native)
         rate = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
-        require(trained_at == args.frame_skip, f"{rate}: pass --frame-skip {trained_at} or use another --output-dir")
+        fix = f"pass --frame-skip {trained_at} or use another --output-dir"
+        require(trained_at == args.frame_skip, f"{rate}: {fix}")
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
-            raise UsageError(f"cannot resume from {latest_path} ({type(error).__name__}): delete it or drop --resume")
-        # state["args"] is a record only, never read back: old checkpoints resume, and the flags given now rule
-        for rms, name in ((obs_rms, "obs"), (ret_rms, "ret")):
-            rms.mean, rms.var = state[f"{name}_mean"].numpy(), state[f"{name}_var"].numpy()
-            rms.count = state[f"{name}_count"]
-        global_step, best_return = state["global_step"], state["best_return"]
+            name = type(error).__name__
+            raise UsageError(f"{cannot_resume} ({name}): delete it or drop --resume")
+        # state["args"] is a record only, never read back: old checkpoints resume, and the flags
+        # given now rule.
+        obs_rms.mean = state["obs_mean"].numpy()
+        obs_rms.var = state["obs_var"].numpy()
+        obs_rms.count = state["obs_count"]
+        ret_rms.mean = state["ret_mean"].numpy()
+        ret_rms.var = state["ret_var"].numpy()
+        ret_rms.count = state["ret_count"]
+        global_step = state["global_step"]
+        best_return = state["best_return"]
         print(f"resumed from {latest_path} at step {global_step}")
     elif args.resume:
         print(f"no {latest_path} yet: starting fresh")
 
-    def checkpoint(eval_return=None):  # a plain dict of tensors and numbers (experts/README.md)
-        def to_tensor(x):
-            return torch.as_tensor(np.asarray(x), dtype=torch.float64)
+    def to_tensor(x):
+        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
 
+    def checkpoint(eval_return=None):
+        # A plain dict of tensors and numbers (experts/README.md).
         return {
             "format": "copycat-suite/expert-ppo/1",
             "env_id": args.env,
-            "frame_skip": args.frame_skip,  # the rate it was trained at (None resolved above to the env's own)
+            # The rate it was trained at (None was resolved above to the env's own).
+            "frame_skip": args.frame_skip,
             "obs_shape": list(envs.single_observation_space.shape),
             "action_shape": list(envs.single_action_space.shape),
             "hidden": args.hidden,
@@ -464,8 +603,9 @@ def train(args: Args):
             "args": asdict(args),
             "global_step": global_step,
             "eval_return": eval_return,
-            "machine": machine(),  # where it was trained (checkpoints made before this have none)
-            # only needed to resume training:
+            # Where it was trained (checkpoints made before this have none).
+            "machine": machine(),
+            # Only needed to resume training:
             "agent": agent.state_dict(),
             "optimizer": optimizer.state_dict(),
             "obs_count": obs_rms.count,
@@ -478,68 +618,98 @@ def train(args: Args):
     def frozen_policy():
         return ExpertPolicy(checkpoint())
 
-    def normalized(raw: np.ndarray) -> torch.Tensor:  # the observations as the networks read them
+    def normalized(raw: np.ndarray) -> torch.Tensor:
+        # The observations as the networks read them.
         return torch.as_tensor(obs_rms.normalize(raw), dtype=torch.float32)
 
     batch_size = args.num_envs * args.num_steps
-    obs_buf, act_buf = (torch.zeros((args.num_steps, args.num_envs, dim)) for dim in (obs_dim, act_dim))
-    logp_buf, rew_buf, done_buf, val_buf = (torch.zeros((args.num_steps, args.num_envs)) for _ in range(4))
+    minibatch_size = batch_size // args.num_minibatches
+    obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim))
+    act_buf = torch.zeros((args.num_steps, args.num_envs, act_dim))
+    logp_buf = torch.zeros((args.num_steps, args.num_envs))
+    rew_buf = torch.zeros((args.num_steps, args.num_envs))
+    done_buf = torch.zeros((args.num_steps, args.num_envs))
+    val_buf = torch.zeros((args.num_steps, args.num_envs))
 
-    raw_obs, _ = envs.reset(seed=args.seed + global_step)  # a resumed run gets fresh episodes
-    discounted_return = np.zeros(args.num_envs)  # for reward scaling, as gymnasium's NormalizeReward
-    episode_return, recent_returns = np.zeros(args.num_envs), []
-    start_time, start_step = time.time(), global_step
-    next_save, next_eval = global_step + args.save_every_steps, global_step + args.eval_every_steps
+    # A resumed run gets fresh episodes.
+    raw_obs, _ = envs.reset(seed=args.seed + global_step)
+    # The discounted return of each env, for reward scaling as gymnasium's NormalizeReward.
+    discounted_return = np.zeros(args.num_envs)
+    episode_return = np.zeros(args.num_envs)
+    recent_returns = []
+    start_time = time.time()
+    start_step = global_step
+    next_save = global_step + args.save_every_steps
+    next_eval = global_step + args.eval_every_steps
 
     while global_step < args.total_timesteps:
-        optimizer.param_groups[0]["lr"] = args.learning_rate * max(1.0 - global_step / args.total_timesteps, 0.0)
+        # Anneal the learning rate linearly to zero.
+        frac = max(1.0 - global_step / args.total_timesteps, 0.0)
+        optimizer.param_groups[0]["lr"] = args.learning_rate * frac
 
-        with torch.no_grad():  # ---- rollout (it and the advantage estimation below need no gradients)
+        # ---- Rollout (it and the advantage estimation below need no gradients)
+        with torch.no_grad():
             for step in range(args.num_steps):
                 obs_rms.update(raw_obs)
                 obs = normalized(raw_obs)
                 action, logp, _, value = agent.action_and_value(obs)
-                raw_obs, reward, terminated, truncated, info = envs.step(action.numpy().clip(action_low, action_high))
+                clipped_action = action.numpy().clip(action_low, action_high)
+                raw_obs, reward, terminated, truncated, info = envs.step(clipped_action)
                 global_step += args.num_envs
                 episode_return += reward
 
+                # Scale rewards by the std of the discounted return.
                 discounted_return = discounted_return * args.gamma + reward
                 ret_rms.update(discounted_return)
                 scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
                 done = terminated | truncated
-                if truncated.any():  # time limit, not death: bootstrap from the value of the last observation
-                    final_obs = np.stack(
-                        [info["final_obs"][i] if truncated[i] else raw_obs[i] for i in range(args.num_envs)]
-                    )
+                # A time limit is not a death: bootstrap from the value of the last observation.
+                if truncated.any():
+                    final_obs = raw_obs.copy()
+                    for i in np.flatnonzero(truncated):
+                        final_obs[i] = info["final_obs"][i]
                     final_value = agent.value(normalized(final_obs)).numpy()
-                    scaled_reward = scaled_reward + args.gamma * final_value * (truncated & ~terminated)
+                    bootstrap = (truncated & ~terminated).astype(np.float32)
+                    scaled_reward = scaled_reward + args.gamma * final_value * bootstrap
                 for i in np.flatnonzero(done):
-                    recent_returns = (recent_returns + [episode_return[i]])[-20:]
-                    episode_return[i], discounted_return[i] = 0.0, 0.0
+                    recent_returns.append(episode_return[i])
+                    recent_returns = recent_returns[-20:]
+                    episode_return[i] = 0.0
+                    discounted_return[i] = 0.0
 
-                obs_buf[step], act_buf[step], logp_buf[step], val_buf[step] = obs, action, logp, value
+                obs_buf[step] = obs
+                act_buf[step] = action
+                logp_buf[step] = logp
+                val_buf[step] = value
                 rew_buf[step] = torch.as_tensor(scaled_reward, dtype=torch.float32)
                 done_buf[step] = torch.as_tensor(done, dtype=torch.float32)
 
-            # ---- generalised advantage estimation; done[t] cuts the episode after step t
+            # ---- Generalised advantage estimation (GAE); done[t] ends the episode after step t
             next_value = agent.value(normalized(raw_obs))
-            advantages, last_gae = torch.zeros_like(rew_buf), 0.0
+            advantages = torch.zeros_like(rew_buf)
+            last_gae = 0.0
             for t in reversed(range(args.num_steps)):
                 following_value = next_value if t == args.num_steps - 1 else val_buf[t + 1]
                 not_done = 1.0 - done_buf[t]
                 delta = rew_buf[t] + args.gamma * following_value * not_done - val_buf[t]
-                advantages[t] = last_gae = delta + args.gamma * args.gae_lambda * not_done * last_gae
+                last_gae = delta + args.gamma * args.gae_lambda * not_done * last_gae
+                advantages[t] = last_gae
             returns = advantages + val_buf
 
-        # ---- PPO update
-        b_obs, b_act = obs_buf.reshape(-1, obs_dim), act_buf.reshape(-1, act_dim)
-        b_logp, b_adv, b_ret = logp_buf.reshape(-1), advantages.reshape(-1), returns.reshape(-1)
+        # ---- PPO update: the clipped surrogate objective (PPO paper, Eq. 7) and the value loss
+        b_obs = obs_buf.reshape(-1, obs_dim)
+        b_act = act_buf.reshape(-1, act_dim)
+        b_logp = logp_buf.reshape(-1)
+        b_adv = advantages.reshape(-1)
+        b_ret = returns.reshape(-1)
         for _ in range(args.update_epochs):
-            for idx in torch.randperm(batch_size).split(batch_size // args.num_minibatches):
+            for idx in torch.randperm(batch_size).split(minibatch_size):
                 _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
                 ratio = (new_logp - b_logp[idx]).exp()
+                # Advantages normalised per minibatch.
                 adv = (b_adv[idx] - b_adv[idx].mean()) / (b_adv[idx].std() + 1e-8)
-                policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - args.clip_coef, 1 + args.clip_coef)).mean()
+                clipped_ratio = ratio.clamp(1 - args.clip_coef, 1 + args.clip_coef)
+                policy_loss = torch.max(-adv * ratio, -adv * clipped_ratio).mean()
                 value_loss = 0.5 * ((new_value - b_ret[idx]) ** 2).mean()
                 loss = policy_loss - args.ent_coef * entropy.mean() + args.vf_coef * value_loss
                 optimizer.zero_grad()
@@ -547,17 +717,23 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
 
-        # ---- progress, evaluation, checkpoints
+        # ---- Progress, evaluation, checkpoints
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
-        recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
+        recent = "n/a"
+        if recent_returns:
+            recent = f"{np.mean(recent_returns):.0f}"
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
         line = f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6}"
         print(f"{line} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
         if global_step >= next_eval:
             next_eval += args.eval_every_steps
-            episodes = (frozen_policy(), args.env, args.train_eval_episodes, args.seed + global_step, args.frame_skip)
-            eval_return = float(np.mean(evaluate(*episodes)))
+            policy = frozen_policy()
+            seed = args.seed + global_step
+            eval_returns = evaluate(
+                policy, args.env, args.train_eval_episodes, seed, args.frame_skip
+            )
+            eval_return = float(np.mean(eval_returns))
             best = max(best_return, eval_return)
             print(f"eval at step {global_step}: {eval_return:.1f} (best {best:.1f})", flush=True)
             if eval_return > best_return:
@@ -566,26 +742,39 @@ def train(args: Args):
         if global_step >= next_save:
             next_save += args.save_every_steps
             save_atomically(checkpoint(), latest_path)
-        if args.max_minutes and elapsed > args.max_minutes * 60 and global_step < args.total_timesteps:
+        # --max-minutes: stop cleanly; the same command with --resume goes on.
+        over_time = elapsed > args.max_minutes * 60
+        if args.max_minutes and over_time and global_step < args.total_timesteps:
             break
 
     save_atomically(checkpoint(), latest_path)
     envs.close()
-    if global_step < args.total_timesteps:  # stopped by --max-minutes
+    if global_step < args.total_timesteps:
         stopped = f"stopped after {args.max_minutes} min at step {global_step}"
         print(f"{stopped}: continue with the same command and --resume")
         return
-    returns = evaluate(frozen_policy(), args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip)
-    save_atomically(checkpoint(float(np.mean(returns))), latest_path)
-    print(f"wrote {latest_path} (last) and {best_path} (best periodic evaluation, {best_return:.1f})")
-    print(f"{args.env} expert: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {len(returns)} episodes")
+    policy = frozen_policy()
+    returns = evaluate(
+        policy, args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip
+    )
+    mean = float(np.mean(returns))
+    std = float(np.std(returns))
+    save_atomically(checkpoint(mean), latest_path)
+    print(
+        f"wrote {latest_path} (last) and {best_path} (best periodic evaluation, {best_return:.1f})"
+    )
+    print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 
 if __name__ == "__main__":
     try:
         args = tyro.cli(Args)
-        mode = make_demos if args.make_demos else eval_only if args.eval_only else train
-        mode(args)
+        if args.make_demos:
+            make_demos(args)
+        elif args.eval_only:
+            eval_only(args)
+        else:
+            train(args)
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

@@ -1,15 +1,17 @@
 """How much a reader has to read: each method file's length and how far it is from bc_oh.py.
 
-    python scripts/file_sizes.py          # a markdown table
-    python scripts/file_sizes.py --page   # also put it between the <!-- sizes --> markers of docs/contributing.md
-    python scripts/file_sizes.py --budget bc_oh   # where one file's formatted lines go, by part (method, run, ...)
-    python scripts/file_sizes.py --features       # what each feature of the shared part costs every method file
+    python scripts/file_sizes.py                  # a markdown table
+    python scripts/file_sizes.py --page           # also write it into docs/contributing.md
+    python scripts/file_sizes.py --budget bc_oh   # where one file's formatted lines go, by part
 
-Lines = the file's lines once formatted by `ruff format --line-length 120` (so long lines cannot hide size; the
-method files are kept formatted, `tests/test_style.py`), characters likewise; diff = the lines
-`diff -I '^# Copied from' bc_oh.py FILE` marks with < or > (what `diff bc_oh.py FILE` shows a reader, copy markers
-aside). In brackets the targets of issue 31; CLEANRL_CORL gives the anchors' sizes, for comparison.
+Lines = the file's lines once formatted by `ruff format --line-length 100` (so long lines cannot
+hide size; the method files are kept formatted, `tests/test_style.py`); diff = the lines
+`diff -I '^# Copied from' bc_oh.py FILE` marks with < or > (what `diff bc_oh.py FILE` shows a
+reader, copy markers aside); c2f_table3.py is compared with c2f.py instead, the file it varies.
+In brackets the targets of issue 55; ANCHORS gives the anchors' sizes, for comparison. --page
+puts the table between the <!-- sizes --> markers of docs/contributing.md (or of the page named).
 """
+
 import ast
 import re
 import subprocess
@@ -24,80 +26,59 @@ from benchmark.results import OneLineParser, UsageError, run_cli, write_text  # 
 PAGE = Path("docs/contributing.md")
 """the page whose <!-- sizes --> block --page writes when it names no page"""
 MARKERS = "<!-- sizes -->", "<!-- /sizes -->"
-TARGETS = {"bc_oh": (400, 18_000, None), "bc_so": (440, None, 20), "history_dropout": (440, None, 30),
-           "c2f": (480, None, 120), "fca": (440, None, 120), "keyframe": (440, None, 120),
-           "average_ensemble": (440, None, 120), "dagger": (480, None, 150)}
-"""method file -> (most formatted lines, most characters, most diff lines against bc_oh.py); None: no target"""
-ANCHORS = "| CleanRL `ppo_continuous_action.py` (for comparison) | 353 | 14.6k | — |\n| CORL `any_percent_bc.py` | 406 | — | — |\n"
+TARGETS = {
+    "bc_oh": (380, None),
+    "bc_so": (400, 24),
+    "history_dropout": (400, 36),
+    "c2f": (430, 100),
+    "fca": (460, 160),
+    "keyframe": (460, 160),
+    "average_ensemble": (460, 160),
+    "dagger": (500, 200),
+    "c2f_table3": (520, None),
+    "expert_ppo": (700, None),
+}
+"""file -> (most formatted lines, most diff lines against bc_oh.py); None: no target. A file that
+does not exist (yet) is left out of the table."""
+BASES = {"c2f_table3": "c2f"}
+"""file -> the file its diff is counted against, where that is not bc_oh (no target: shown only)"""
+NO_DIFF = {"bc_oh", "expert_ppo"}
+"""files whose row shows no diff: bc_oh itself, and the expert (another algorithm)"""
+RUFF = [sys.executable, "-m", "ruff"]
+"""ruff through the running interpreter, so it needs no venv bin/ on PATH"""
+ANCHORS = (
+    "| CleanRL `ppo_continuous_action.py` (for comparison; black, 127 columns) | 353 | — |\n"
+    "| CORL `any_percent_bc.py` (black) | 406 | — |\n"
+)
 """the two single-file anchors, measured in their own repositories (../shared/STYLE.md)"""
 
-
-PARTS = {"run": ("run", "train_and_record", "run_name", "finished_seed", "write_result", "member_summary"),
-         "errors": ("UsageError", "require"), "evaluation": ("evaluate",),
-         "env and partial observability": ("velocity_dims", "PartialObservation", "make_env"),
-         "data": ("load_demos", "partially_observe", "stack_history")}
-"""the parts of a method file by its top-level definitions; `Args` is its own part, and every other definition is the
-method's (network, loss, training step, train_seed, fit; DAgger's expert); the rest (header, imports, banners, copy
-markers, the blank lines between definitions, `__main__`) is counted as such"""
-
-FEATURES = {
-    "--velocity-dims": [(r'^    velocity_dims: .*\n    """.*\n', ""), (r"^    if override:\n(?:        .*\n){2}", "")],
-    "the demos' copy error": [(r"^    (?:step_error|copy_error|shortcut) = .*\n", ""), (r"; \{shortcut\} \(near 0[^)]*\)", "")],
-    "the job's ETA": [(r"^    (?:workers, position|waves_after) = .*\n", ""), (r"^ +eta = .*\n", ""), (r" \| job ETA \{eta:\.1f\} min", "")],
-    "the share of the expert's return": [(r'^    if "expert_return" in meta:.*\n(?:        .*\n)+', "")],
-    "the hint for transposed demos": [(r"^    turned = .*\n", ""), (r"^    fix = .*\n", '    fix = "use demos of this env"\n')],
-    "the kept and waiting seeds' lines": [(r"^    if kept:\n        .*\n", ""), (r"^    if len\(to_train\) > args\.workers:\n(?:        .*\n)+", "")],
-    "the usage line of the docstring": [(r'\n\n    python bc_oh\.py --env Hopper-v4\n"""', '"""')],
-    "keeping finished seeds on a rerun": [(r"^def finished_seed(?:.*\n)*?(?=^def )", ""), (r"finished_seed\(output_dir, s(?:eed)?, args\)", "None")],
-    "a clean interrupt": [(r"^    try:\n((?:        .*\n)+)    except KeyboardInterrupt:.*\n(?:        .*\n)+", lambda m: re.sub("^    ", "", m[1], flags=re.M)),
-                          (r"^ +signal\.signal\(.*\n", ""), (r"^import signal\n", "")],
-    "run names that keep settings apart": [(r"^def run_name(?:.*\n)*?(?=^def )", ""), (r"run_name\(args\)", "METHOD")],
-    "the one-line refusals of bad flags and demos": [  # the require checks, their messages and their loops
-        (r'^    for key in (?:"history|\("observations", "actions").*\n(?:        (?:value, flag|require).*\n)+', ""),
-        (r'^    for key, values in \(\("observations".*\n(?:        .*\n){2}', ""), (r"^ +require\(.*\n", ""),
-        (r"^    (?:seeds|samples, batch|make|where|turned|fix|need|shapes|rows|batch|outside|bounds) \+?= .*\n", ""),
-        (r"^    low, high = env\.action_space.*\n", "")],
+PARTS = {
+    "run": ("run", "train_and_record", "write_result", "member_summary"),
+    "errors": ("UsageError",),
+    "evaluation": ("evaluate",),
+    "env and partial observability": ("velocity_dims", "PartialObservation", "make_env"),
+    "data": ("load_demos", "partially_observe", "stack_history"),
 }
-"""a feature of the shared part (the same in every method file) -> the edits of formatted bc_oh.py that take it out,
-(regular expression, replacement) each, applied in turn; --features measures what each saves, and all of them"""
-
-
-def feature_costs() -> dict:
-    """{feature: (formatted lines, characters)} that taking it out of bc_oh.py saves (so every method file: the shared
-    part is the same in each), and {"all of them": ...}; a UsageError if an edit no longer finds its text."""
-    text, costs = formatted("bc_oh"), {}
-    every = text
-    for feature, edits in FEATURES.items():
-        cut = text
-        for pattern, replacement in edits:
-            cut, found = re.subn(pattern, replacement, cut, flags=re.M)
-            every = re.sub(pattern, replacement, every, flags=re.M)
-            if not found:
-                raise UsageError(f"the edit {pattern!r} of {feature!r} finds nothing in bc_oh.py: update FEATURES")
-        costs[feature] = size(text, cut, feature)
-    costs["all of them"] = size(text, every, "all of them")
-    return costs
-
-
-def size(text: str, cut: str, feature: str) -> tuple:  # (formatted lines, characters) cut, formatted, has fewer
-    try:
-        ast.parse(cut)  # a cut that broke the file would measure nothing
-    except SyntaxError as error:
-        raise UsageError(f"the edits of {feature!r} leave bc_oh.py unparsable (line {error.lineno}): update FEATURES")
-    cut = format_text(cut)
-    return len(text.splitlines()) - len(cut.splitlines()), len(text) - len(cut)
+"""the parts of a method file by its top-level definitions (a name a file lacks counts 0); `Args`
+is its own part, and every other definition is the method's (mlp, Normalizer, Policy,
+make_policy, train_seed, fit; DAgger's expert); the rest (header, imports, banners, copy markers,
+the blank lines between definitions, `__main__`) is counted as such"""
 
 
 def budget(name: str) -> dict:
-    """{part: formatted lines} of a method file, each definition counted from its first line (decorators included)
-    to its last; the parts sum to the file's formatted lines."""
+    """{part: formatted lines} of a method file, each definition counted from its first line
+    (decorators included) to its last; the parts sum to the file's formatted lines."""
     text = formatted(name)
     parts = dict.fromkeys(["Args", "the method", *PARTS, "the rest"], 0)
     for node in ast.parse(text).body:
         if not isinstance(node, (ast.FunctionDef, ast.ClassDef)):
             continue
-        part = next((part for part, names in PARTS.items() if node.name in names), None)
-        part = part or ("Args" if node.name == "Args" else "the method")
+        part = "the method"
+        if node.name == "Args":
+            part = "Args"
+        for candidate, names in PARTS.items():
+            if node.name in names:
+                part = candidate
         first = min([node.lineno, *(decorator.lineno for decorator in node.decorator_list)])
         parts[part] += node.end_lineno - first + 1
     parts["the rest"] += len(text.splitlines()) - sum(parts.values())
@@ -105,49 +86,86 @@ def budget(name: str) -> dict:
 
 
 def formatted(name: str) -> str:
-    """The file as `ruff format --line-length 120` writes it."""
-    return format_text((ROOT / f"{name}.py").read_text())
+    """The file as `ruff format --line-length 100` writes it."""
+    path = ROOT / f"{name}.py"
+    if not path.exists():
+        raise UsageError(f"{path} not found")
+    return format_text(path.read_text())
 
 
 def format_text(source: str) -> str:
-    try:
-        done = subprocess.run(["ruff", "format", "--line-length", "120", "-"], input=source, capture_output=True, text=True, check=True)
-    except FileNotFoundError:
-        raise UsageError("ruff is not on PATH: pip install -r requirements.txt (it pins ruff), in the active venv")
+    command = [*RUFF, "format", "--line-length", "100", "-"]
+    done = subprocess.run(command, input=source, capture_output=True, text=True)
+    if done.returncode != 0 and "No module named" in done.stderr:
+        message = f"ruff is not installed for {sys.executable}: pip install -r requirements.txt"
+        raise UsageError(message + " (it pins ruff), in the active venv")
+    if done.returncode != 0:
+        first_line = (done.stderr.strip().splitlines() or ["no message"])[0]
+        raise UsageError(f"ruff format failed: {first_line}")
     return done.stdout
 
 
-def diff_lines(name: str) -> int:
-    diff = subprocess.run(["diff", "-I", "^# Copied from", str(ROOT / "bc_oh.py"), str(ROOT / f"{name}.py")], capture_output=True, text=True)
+def diff_lines(name: str, base: str = "bc_oh") -> int:
+    """The lines `diff -I '^# Copied from' BASE.py NAME.py` marks with < or >."""
+    command = ["diff", "-I", "^# Copied from", str(ROOT / f"{base}.py"), str(ROOT / f"{name}.py")]
+    diff = subprocess.run(command, capture_output=True, text=True)
     return len(re.findall(r"^[<>]", diff.stdout, re.M))
 
 
+def existing() -> list:
+    """The names in TARGETS whose file exists."""
+    return [name for name in TARGETS if (ROOT / f"{name}.py").exists()]
+
+
 def target(value, most) -> str:
-    return f"{value}" if most is None else f"{value} ({most}{'' if value <= most else ', over'})"
+    if most is None:
+        return f"{value}"
+    if value > most:
+        return f"{value} ({most}, over)"
+    return f"{value} ({most})"
+
+
+def diff_cell(name: str) -> str:
+    if name in NO_DIFF:
+        return "—"
+    if name in BASES:
+        return f"{diff_lines(name, BASES[name])} against {BASES[name]}.py"
+    return target(diff_lines(name), TARGETS[name][1])
 
 
 def table() -> str:
-    rows = ["| file | formatted lines (target) | characters (target) | diff vs bc_oh.py (target) |", "|---|---:|---:|---:|"]
-    for name, (most_lines, most_chars, most_diff) in TARGETS.items():
-        text = formatted(name)
-        diff = "—" if most_diff is None else target(diff_lines(name), most_diff)
-        rows.append(f"| `{name}.py` | {target(len(text.splitlines()), most_lines)} | {target(len(text), most_chars)} | {diff} |")
+    rows = [
+        "| file | formatted lines (target) | diff vs bc_oh.py (target) |",
+        "|---|---:|---:|",
+    ]
+    for name in existing():
+        lines = len(formatted(name).splitlines())
+        rows.append(f"| `{name}.py` | {target(lines, TARGETS[name][0])} | {diff_cell(name)} |")
     return "\n".join(rows) + "\n" + ANCHORS
 
 
 def main(argv=None):
-    parser = OneLineParser(prog="python scripts/file_sizes.py", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--page", type=Path, nargs="?", const=PAGE, help=f"also put the table between this page's (alone: {PAGE}) {' and '.join(MARKERS)} markers")
-    parser.add_argument("--budget", choices=list(TARGETS), help="print instead where this file's formatted lines go, by part")
-    parser.add_argument("--features", action="store_true", help="print instead what each feature of the shared part costs")
+    parser = OneLineParser(
+        prog="python scripts/file_sizes.py", description=__doc__.split("\n\n")[0]
+    )
+    markers = " and ".join(MARKERS)
+    parser.add_argument(
+        "--page",
+        type=Path,
+        nargs="?",
+        const=PAGE,
+        help=f"also put the table between this page's (alone: {PAGE}) {markers} markers",
+    )
+    parser.add_argument(
+        "--budget",
+        choices=list(TARGETS),
+        help="print instead where this file's formatted lines go, by part",
+    )
     args = parser.parse_args(argv)
-    if args.features:
-        for feature, (lines, characters) in feature_costs().items():
-            print(f"{feature}: {lines} formatted lines, {characters} characters")
-        return 0
     if args.budget:
         parts = budget(args.budget)
-        print(f"{args.budget}.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{part} {n}" for part, n in parts.items()))
+        shares = "; ".join(f"{part} {n}" for part, n in parts.items())
+        print(f"{args.budget}.py, {sum(parts.values())} formatted lines: {shares}")
         return 0
     if args.page:
         page_parts(args.page, *MARKERS)  # check the markers before anything else

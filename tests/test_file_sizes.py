@@ -1,40 +1,105 @@
-"""scripts/file_sizes.py: the table of file lengths and diffs against bc_oh.py, and the contributors' page it goes into."""
+"""scripts/file_sizes.py: the table of file lengths and diffs against bc_oh.py, and the
+contributors' page it goes into."""
+
+import sys
+from types import SimpleNamespace
+
 import file_sizes
 import pytest
 from conftest import REPO_ROOT, assert_usage_error, run_script
 
 
-def test_the_table_has_a_row_per_method_file_and_the_anchors(tmp_path):
+def run_in_process(capsys, argv):
+    """Run file_sizes as its command does (run_cli): (exit status, stdout, stderr) as a result
+    for assert_usage_error."""
+    with pytest.raises(SystemExit) as exit:
+        file_sizes.run_cli(lambda: file_sizes.main(argv))
+    captured = capsys.readouterr()
+    return SimpleNamespace(returncode=exit.value.code, stdout=captured.out, stderr=captured.err)
+
+
+HEADER = [
+    "| file | formatted lines (target) | diff vs bc_oh.py (target) |",
+    "|---|---:|---:|",
+]
+
+
+def over(value, most):
+    if value > most:
+        return ", over"
+    return ""
+
+
+def test_the_table_has_a_row_per_existing_file_and_the_anchors(tmp_path):
     lines = file_sizes.table().splitlines()
-    assert lines[:2] == ["| file | formatted lines (target) | characters (target) | diff vs bc_oh.py (target) |", "|---|---:|---:|---:|"]
+    assert lines[:2] == HEADER
     rows = {row.split(" | ")[0].strip("| `"): row.split(" | ")[1:] for row in lines[2:]}
-    assert set(rows) == {f"{name}.py" for name in file_sizes.TARGETS} | {"CleanRL `ppo_continuous_action.py` (for comparison)",
-                                                                       "CORL `any_percent_bc.py"}
-    text = file_sizes.formatted("bc_oh")
-    over = lambda value, most: ", over" if value > most else ""  # noqa: E731
-    assert rows["bc_oh.py"] == [f"{len(text.splitlines())} (400{over(len(text.splitlines()), 400)})",
-                                f"{len(text)} (18000{over(len(text), 18_000)})", "— |"]
+    files = {f"{name}.py" for name in file_sizes.TARGETS if (REPO_ROOT / f"{name}.py").exists()}
+    assert {"bc_oh.py", "c2f.py", "dagger.py", "expert_ppo.py"} <= files
+    anchors = {
+        "CleanRL `ppo_continuous_action.py` (for comparison; black, 127 columns)",
+        "CORL `any_percent_bc.py` (black)",
+    }
+    assert set(rows) == files | anchors
+    lines = len(file_sizes.formatted("bc_oh").splitlines())
+    assert rows["bc_oh.py"] == [f"{lines} (380{over(lines, 380)})", "— |"]
     diff = file_sizes.diff_lines("dagger")
-    assert rows["dagger.py"][2] == f"{diff} (150{over(diff, 150)}) |" and rows["dagger.py"][1].isdigit()  # no character target
+    assert rows["dagger.py"][1] == f"{diff} (200{over(diff, 200)}) |"
+    assert rows["expert_ppo.py"][1] == "— |"
     assert 0 < file_sizes.diff_lines("bc_so") < diff
     page = tmp_path / "page.md"
     page.write_text("intro\n<!-- sizes -->\nold\n<!-- /sizes -->\nrest\n")
     file_sizes.main(["--page", str(page)])
-    assert page.read_text() == "intro\n<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\nrest\n"
+    expected = "intro\n<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\nrest\n"
+    assert page.read_text() == expected
 
 
-def test_lines_and_characters_are_counted_formatted_and_copy_markers_are_no_diff(tmp_path, monkeypatch):
-    """A long line counts as the lines `ruff format` makes of it; a '# Copied from' marker is not a difference."""
-    long = "VALUES = [" + ", ".join(map(str, range(60))) + "]\n"  # 240 columns: ruff puts each entry on its own line
+def test_lines_are_counted_formatted_and_copy_markers_are_no_diff(tmp_path, monkeypatch):
+    """A long line counts as the lines `ruff format` makes of it at 100 columns; a '# Copied from'
+    marker is not a difference; a file that does not exist has no row."""
+    long = "VALUES = [" + ", ".join(map(str, range(30))) + "]\n"  # 120 columns: one entry a line
     (tmp_path / "bc_oh.py").write_text("def f():\n    return 1\n" + long)
     (tmp_path / "bc_so.py").write_text("# Copied from bc_oh.f\ndef f():\n    return 2\n" + long)
     monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
-    monkeypatch.setattr(file_sizes, "TARGETS", {"bc_oh": (60, 500, None), "bc_so": (100, None, 2)})
-    formatted = "def f():\n    return 1\n\n\nVALUES = [\n" + "".join(f"    {n},\n" for n in range(60)) + "]\n"
+    targets = {"bc_oh": (30, None), "bc_so": (100, 2), "fca": (460, 160)}
+    monkeypatch.setattr(file_sizes, "TARGETS", targets)
+    entries = "".join(f"    {n},\n" for n in range(30))
+    formatted = "def f():\n    return 1\n\n\nVALUES = [\n" + entries + "]\n"
     assert file_sizes.formatted("bc_oh") == formatted
+    assert file_sizes.table().splitlines()[2:] == [
+        "| `bc_oh.py` | 36 (30, over) | — |",
+        "| `bc_so.py` | 37 (100) | 2 (2) |",  # return 1 -> return 2: one < and one >
+        *file_sizes.ANCHORS.splitlines(),
+    ]
+
+
+def test_a_line_of_100_columns_stays_one_line(tmp_path, monkeypatch):
+    line = "VALUES = [" + ", ".join(["1234"] * 14) + ", 12345]\n"
+    assert len(line) == 101  # 100 columns and the newline
+    (tmp_path / "bc_oh.py").write_text(line)
+    monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
+    assert file_sizes.formatted("bc_oh") == line
+    (tmp_path / "bc_oh.py").write_text(line.replace("12345]", "123456]"))
+    assert len(file_sizes.formatted("bc_oh").splitlines()) > 1
+
+
+def test_c2f_table3_is_compared_with_c2f_when_it_exists(tmp_path, monkeypatch):
+    (tmp_path / "bc_oh.py").write_text("x = 1\n")
+    (tmp_path / "c2f.py").write_text("x = 1\ny = 2\n")
+    monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
+    monkeypatch.setattr(
+        file_sizes, "TARGETS", {name: file_sizes.TARGETS[name] for name in ["c2f", "c2f_table3"]}
+    )
+    assert [row.split(" | ")[0] for row in file_sizes.table().splitlines()[2:4]] == [
+        "| `c2f.py`",
+        "| CleanRL `ppo_continuous_action.py` (for comparison; black, 127 columns)",
+    ]
+    (tmp_path / "c2f_table3.py").write_text("x = 1\ny = 3\nz = 4\n")
     rows = file_sizes.table().splitlines()[2:4]
-    assert rows == [f"| `bc_oh.py` | 66 (60, over) | {len(formatted)} (500, over) | — |",
-                    f"| `bc_so.py` | 67 (100) | {len(formatted) + len('# Copied from bc_oh.f') + 1} | 2 (2) |"]  # return 1 -> return 2: one < and one >
+    assert rows == [
+        "| `c2f.py` | 2 (430) | 1 (100) |",
+        "| `c2f_table3.py` | 3 (520) | 3 against c2f.py |",
+    ]
 
 
 def test_a_bare_page_flag_writes_docs_contributing_md(tmp_path, monkeypatch):
@@ -43,12 +108,13 @@ def test_a_bare_page_flag_writes_docs_contributing_md(tmp_path, monkeypatch):
     (tmp_path / "docs" / "contributing.md").write_text("<!-- sizes -->\n<!-- /sizes -->\n")
     assert str(file_sizes.PAGE) == "docs/contributing.md"
     file_sizes.main(["--page"])
-    assert (tmp_path / "docs" / "contributing.md").read_text() == "<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\n"
+    expected = "<!-- sizes -->\n" + file_sizes.table() + "<!-- /sizes -->\n"
+    assert (tmp_path / "docs" / "contributing.md").read_text() == expected
 
 
 def test_docs_contributing_md_holds_the_current_table():
-    """The page the script owns carries its block, up to date with the method files (after changing one, run
-    `python scripts/file_sizes.py --page`)."""
+    """The page the script owns carries its block, up to date with the method files (after
+    changing one, run `python scripts/file_sizes.py --page`)."""
     before, after = file_sizes.page_parts(REPO_ROOT / file_sizes.PAGE, *file_sizes.MARKERS)
     text = (REPO_ROOT / file_sizes.PAGE).read_text()
     assert text == before + "\n" + file_sizes.table() + after
@@ -56,54 +122,64 @@ def test_docs_contributing_md_holds_the_current_table():
 
 def test_a_page_without_markers_is_one_line(tmp_path):
     (tmp_path / "page.md").write_text("no markers\n")
-    assert_usage_error(run_script("scripts/file_sizes.py", "--page", tmp_path / "page.md"), "needs one <!-- sizes --> line")
-    assert_usage_error(run_script("scripts/file_sizes.py", "--page", tmp_path / "missing.md"), "not found")
+    result = run_script("scripts/file_sizes.py", "--page", tmp_path / "page.md")
+    assert_usage_error(result, "needs one <!-- sizes --> line")
+    result = run_script("scripts/file_sizes.py", "--page", tmp_path / "missing.md")
+    assert_usage_error(result, "not found")
 
 
-def test_the_budget_gives_each_definitions_lines_to_its_part_and_sums_to_the_file(tmp_path, monkeypatch):
-    source = ('"""doc"""\nimport os\n\n\nclass Args:\n    x = 1\n\n\ndef mlp():\n    return 1\n\n\n@staticmethod\ndef run():\n'
-              "    return 2\n\n\ndef load_demos():\n    return 3\n")
+def test_the_budget_gives_each_definitions_lines_to_its_part_and_sums_to_the_file(
+    tmp_path, monkeypatch
+):
+    source = (
+        '"""doc"""\nimport os\n\n\nclass Args:\n    x = 1\n\n\ndef mlp():\n    return 1\n\n\n'
+        "@staticmethod\ndef run():\n    return 2\n\n\ndef load_demos():\n    return 3\n"
+    )
     (tmp_path / "bc_oh.py").write_text(source)
     monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
-    assert file_sizes.budget("bc_oh") == {"Args": 2, "the method": 2, "run": 3, "errors": 0, "evaluation": 0,
-                                          "env and partial observability": 0, "data": 2, "the rest": 11}
-    assert len(file_sizes.formatted("bc_oh").splitlines()) == 20  # ruff puts a blank line after the docstring
+    assert file_sizes.budget("bc_oh") == {
+        "Args": 2,
+        "the method": 2,
+        "run": 3,
+        "errors": 0,
+        "evaluation": 0,
+        "env and partial observability": 0,
+        "data": 2,
+        "the rest": 11,
+    }
+    # ruff puts a blank line after the docstring
+    assert len(file_sizes.formatted("bc_oh").splitlines()) == 20
 
 
 def test_the_budget_of_a_real_file_sums_to_its_formatted_lines_and_is_printed_in_one_line(capsys):
     parts = file_sizes.budget("c2f")
-    assert sum(parts.values()) == len(file_sizes.formatted("c2f").splitlines()) and parts["the method"] > parts["evaluation"] > 0
+    assert sum(parts.values()) == len(file_sizes.formatted("c2f").splitlines())
+    assert parts["the method"] > parts["evaluation"] > 0
     assert file_sizes.main(["--budget", "c2f"]) == 0
-    assert capsys.readouterr().out == f"c2f.py, {sum(parts.values())} formatted lines: " + "; ".join(f"{p} {n}" for p, n in parts.items()) + "\n"
+    shares = "; ".join(f"{p} {n}" for p, n in parts.items())
+    expected = f"c2f.py, {sum(parts.values())} formatted lines: {shares}\n"
+    assert capsys.readouterr().out == expected
 
 
-def test_without_ruff_it_says_so_in_one_line():
-    result = run_script("scripts/file_sizes.py", env={"PATH": ""})
-    assert_usage_error(result, "ruff is not on PATH: pip install -r requirements.txt")
-    assert result.returncode == 2
-
-
-def test_each_feature_of_the_shared_part_has_a_cost_and_all_cost_the_most(capsys):
-    """--features: taking each feature out of bc_oh.py (so out of every method file) saves lines and characters."""
-    costs = file_sizes.feature_costs()
-    assert list(costs) == [*file_sizes.FEATURES, "all of them"]
-    assert all(lines > 0 and characters > 0 for lines, characters in costs.values())
-    every = costs.pop("all of them")
-    assert max(lines for lines, _ in costs.values()) < every[0] <= sum(lines for lines, _ in costs.values())
-    assert file_sizes.main(["--features"]) == 0
-    printed = capsys.readouterr().out.splitlines()
-    assert printed[0] == f"--velocity-dims: {costs['--velocity-dims'][0]} formatted lines, {costs['--velocity-dims'][1]} characters"
-    assert len(printed) == len(file_sizes.FEATURES) + 1 and printed[-1].startswith(f"all of them: {every[0]} formatted lines")
-
-
-def test_a_feature_cost_counts_the_formatted_lines_its_edits_take_out(tmp_path, monkeypatch):
-    (tmp_path / "bc_oh.py").write_text("def f():\n    x = 1\n    y = 2  # a feature\n    return x\n")
+def test_the_budget_of_a_missing_file_is_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(file_sizes, "ROOT", tmp_path)
-    monkeypatch.setattr(file_sizes, "FEATURES", {"y": [(r"^    y = .*\n", "")], "x": [(r"^    x = 1\n", ""), (r"return x", "return 1")]})
-    assert file_sizes.feature_costs() == {"y": (1, 23), "x": (1, 10), "all of them": (2, 33)}
-    monkeypatch.setattr(file_sizes, "FEATURES", {"gone": [(r"^    z = .*\n", "")]})
-    with pytest.raises(file_sizes.UsageError, match="the edit .* of 'gone' finds nothing in bc_oh.py: update FEATURES"):
-        file_sizes.feature_costs()
-    monkeypatch.setattr(file_sizes, "FEATURES", {"broken": [(r"^    return x\n", "    return (\n")]})
-    with pytest.raises(file_sizes.UsageError, match="the edits of 'broken' leave bc_oh.py unparsable"):
-        file_sizes.feature_costs()
+    result = run_in_process(capsys, ["--budget", "c2f_table3"])
+    assert_usage_error(result, f"{tmp_path / 'c2f_table3.py'} not found")
+
+
+def test_ruff_runs_through_the_running_interpreter_without_bin_on_path():
+    """`.venv/bin/python scripts/file_sizes.py` works with no venv bin/ on PATH."""
+    assert file_sizes.RUFF == [sys.executable, "-m", "ruff"]
+    result = run_script("scripts/file_sizes.py", "--budget", "bc_oh", env={"PATH": ""})
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("bc_oh.py, ")
+
+
+def test_without_ruff_it_says_so_in_one_line(monkeypatch, capsys):
+    """Where the running Python has no ruff module (simulated by a module that does not exist)."""
+    monkeypatch.setattr(file_sizes, "RUFF", [sys.executable, "-m", "ruff_is_not_installed"])
+    result = run_in_process(capsys, [])
+    assert_usage_error(
+        result, f"ruff is not installed for {sys.executable}: pip install -r requirements.txt"
+    )
+    assert result.returncode == 2 and result.stdout == ""
