@@ -220,7 +220,8 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        raise UsageError(f"env {env_id!r} has no version: use {env_id}-v4 (the paper's) or -v5")
+        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
     except Exception as error:
@@ -336,7 +337,9 @@ def load_demos(args, env: gym.Env) -> tuple:
             if "episode_starts" in data:
                 demos["episode_starts"] = data["episode_starts"].astype(bool)
     except Exception as error:
-        raise UsageError(f"{path} is not a readable demo file ({error}): see README.md's format")
+        # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
+        message = f"{path} is not a readable demo file ({type(error).__name__})"
+        raise UsageError(f"{message}: see the format in README.md")
     # A file without meta loads: it was made by someone else, at the env's own rate.
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)
@@ -346,7 +349,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
     for key in ["observations", "actions", "episode_starts"]:
         if key not in demos:
-            raise UsageError(f"{path} has no {key!r} array: see README.md's format")
+            raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
     obs = demos["observations"]
     actions = demos["actions"]
     starts = demos["episode_starts"]
@@ -359,7 +362,9 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
-        raise UsageError(f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)}")
+        raise UsageError(
+            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
+        )
     if take <= args.batch_size:
         raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
     obs = obs[:take]
@@ -502,7 +507,8 @@ def run(args):
         print(f"{seed:>6} | {entry['score']:.1f}")
     scores = [entry["score"] for entry in per_seed.values()]
     mean = np.mean(scores)
-    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over seeds {args.seeds}"
+    seeds = "seed" if len(scores) == 1 else "seeds"
+    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} {seeds}"
     # Demos from elsewhere (e.g. Minari) have no expert to compare with.
     if "expert_return" in meta:
         line += f", {mean / meta['expert_return']:.0%} of the expert's {meta['expert_return']:.0f}"

@@ -1,20 +1,23 @@
-# Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Tables 2 and 3); see README.md
-"""C2F: a coarse MLP on o_t gives an action zeta; a policy MLP on [o_{t-H+1}, ..., o_t] and sg(zeta) refines it.
+# Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Table 2); see README.md
+"""C2F: a coarse MLP pi_phi on the current frame o_t gives a coarse action zeta; the policy MLP
+pi_theta on the history [o_{t-H+1}, ..., o_t] and the stop-gradient sg(zeta) gives the final action.
 
-Copying zeta is a simpler shortcut than inferring and copying a_{t-1}, so the policy refines it, not copycats.
+Copying zeta is a simpler shortcut than inferring and copying a_{t-1}, so the policy learns to
+refine it instead of becoming a copycat. Table 3's ablations and the capacity control are in
+c2f_table3.py.
 
-    python c2f.py --env Hopper-v4   # Table 3's ablations: Args' last flags, e.g. --fusion early --no-stop-gradient
+    python c2f.py --env Hopper-v4
 """
 
+import functools
 import json
 import multiprocessing
 import os
 import signal
 import sys
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
 
 import gymnasium as gym
 import mujoco
@@ -28,28 +31,30 @@ METHOD = "c2f"
 
 @dataclass
 class Args:
+    """C2F: coarse-to-fine imitation from the observation history, on MuJoCo (paper section 4)."""
+
+    exp_name: str = os.path.basename(__file__)[: -len(".py")]
+    """the name of this experiment, part of the default output folder"""
     env: str = "Hopper-v4"
-    """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    """gymnasium MuJoCo env id with its version (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: int | None = None
-    """simulator steps per action; None: the env's own (docs/methods.md)"""
+    """simulator steps per action; None: the env's own"""
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
-    """training seeds, scored as mean ± std; a rerun keeps the finished ones"""
+    """training seeds, one run each; the result is their mean ± std"""
     workers: int | None = None
     """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
     demos: str | None = None
-    """demonstrations (.npz); None: demos/<env>_<N>.npz, made by `python expert_ppo.py --make-demos`"""
+    """demonstrations (.npz); None: demos/<env>_<N>.npz, made by expert_ppo.py --make-demos"""
     num_demo_samples: int | None = None
-    """demonstration steps; None: 20000 for Hopper, 10000 otherwise (with --demos: the whole file)"""
+    """demonstration steps; None: 20000 for Hopper, 10000 otherwise (--demos: the whole file)"""
     obs_noise_std: float = 0.2
     """std of the Gaussian noise on the velocity entries of each observation"""
     hide_velocities: bool = False
-    """zero the velocity entries instead (positions only)"""
-    velocity_dims: list[int] | None = None
-    """indices of the velocity entries, for envs not in the built-in table"""
+    """set the velocity entries to zero instead of adding noise (positions only)"""
     history: int = 2
     """frames in the observation history"""
     epochs: int = 1000
-    """epochs of num-samples / batch-size minibatches drawn with replacement"""
+    """passes over the demonstrations, in minibatches drawn with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: float | None = None
@@ -57,39 +62,33 @@ class Args:
     hidden: int = 256
     """width of the hidden layers"""
     eval_every: int = 100
-    """evaluate every this many epochs and after the last; the score is the mean of the last 3"""
+    """evaluate every this many epochs and after the last; a seed's score: the mean of the last 3"""
     eval_episodes: int = 10
     """episodes per evaluation"""
-    output_dir: str = "runs/{run_name}/{env}"
-    """results and models; {run_name}: the method, then each flag changed from its default"""
+    output_dir: str | None = None
+    """folder of the results and models; None: runs/<env>__<exp-name>__<unix time>"""
     save_model: bool = False
     """save each seed's policy (weights, normalisation, args)"""
     cuda: bool = False
     """train on the GPU"""
-    fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
-    """where sg(zeta) joins the policy MLP: late (the paper's), output, middle, early, penultimate (docs/methods.md)"""
-    coarse_output: Literal["action", "feature"] = "action"
-    """what the coarse model passes on: its action zeta (the paper) or its last hidden feature (width --hidden)"""
-    coarse_input: Literal["current", "history"] = "current"
-    """input of the coarse model: the current frame o_t (BC-SO, the paper) or the whole history (BC-OH)"""
-    policy_input: Literal["history", "current"] = "history"
-    """input of the policy model: the whole history (BC-OH, the paper) or the current frame o_t (BC-SO)"""
-    stop_gradient: bool = True
-    """stop the final loss's gradient at zeta (the paper); --no-stop-gradient lets it train the coarse model too"""
-    coarse_action: bool = True
-    """feed sg(zeta) to the policy (the paper); --no-coarse-action, the capacity control: zeros, no coarse loss"""
-    two_stage: bool = False
-    """train the coarse model alone for --epochs and freeze it, then the rest for --epochs on the final loss"""
 
 
-# ---- The method: its network, loss and training ----
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# ---- The method: C2F's networks, loss and training loop ----
 # Copied from bc_oh.mlp..Normalizer
-def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:  # the paper's three-layer MLP
-    layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, out_dim)]
-    return nn.Sequential(*layers)
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP (section 8.3)."""
+    layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+    return nn.Sequential(*layers, nn.Linear(hidden, out_dim))
 
 
-class Normalizer(nn.Module):  # standardises inputs with statistics of the training demos, stored with the model
+class Normalizer(nn.Module):
+    """Standardises inputs with statistics of the training inputs, saved with the model."""
+
     def __init__(self, inputs: torch.Tensor):
         super().__init__()
         self.register_buffer("mean", inputs.mean(0))
@@ -99,378 +98,452 @@ class Normalizer(nn.Module):  # standardises inputs with statistics of the train
         return (x - self.mean) / self.std
 
 
-class Policy(nn.Module):  # C2F as the paper draws it (section 8.3, Fig. 10); Table3Policy below has the ablations
+class Policy(nn.Module):
+    """C2F as the paper draws it (section 8.3, Fig. 10): the coarse model, then the policy model."""
+
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
-        self.normalize, self.obs_dim = Normalizer(inputs), obs_dim
-        self.coarse = mlp(obs_dim, act_dim, hidden)  # pi_phi(o_t) = zeta; then pi_theta, split for --fusion middle
+        self.normalize = Normalizer(inputs)
+        self.obs_dim = obs_dim
+        # The coarse model pi_phi: BC-SO's MLP on the current frame o_t; its output is zeta.
+        self.coarse = mlp(obs_dim, act_dim, hidden)
+        # The policy model pi_theta: three layers on the whole history (split after the first as
+        # in c2f_table3.py, so that both files save their weights under the same names).
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
-        self.policy_rest = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
-        self.head = nn.Linear(hidden + act_dim, act_dim)  # the one more fully-connected layer, on [feature, sg(zeta)]
+        layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+        self.policy_rest = nn.Sequential(*layers)
+        # One more fully-connected layer maps [pi_theta's feature, sg(zeta)] to the final action.
+        self.head = nn.Linear(hidden + act_dim, act_dim)
 
-    def coarse_model(self, obs_history):  # zeta = pi_phi(o_t), and the coarse model's last hidden feature
-        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.obs_dim :])
-        return self.coarse[-1](feature), feature
-
-    def coarse_and_final(self, obs_history):  # (zeta, final action = pi_theta(history, sg(zeta))): what Eq. 2 trains
-        zeta = self.coarse_model(obs_history)[0]
+    def coarse_and_final(self, obs_history):
+        """zeta and the final action: the two outputs that Eq. 2 trains."""
+        zeta = self.coarse(self.normalize(obs_history)[:, -self.obs_dim :])
         feature = self.policy_rest(self.policy_first(self.normalize(obs_history)))
-        return zeta, self.head(torch.cat([feature, zeta.detach()], dim=1))  # detach() is the stop-gradient sg
+        # detach() is the stop-gradient sg: the final action's loss does not train the coarse model.
+        final = self.head(torch.cat([feature, zeta.detach()], dim=1))
+        return zeta, final
 
     def forward(self, obs_history):
-        return self.coarse_and_final(obs_history)[1]
+        zeta, final = self.coarse_and_final(obs_history)
+        return final
 
 
+# Copied from bc_oh.make_policy..stack_history
 def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
-    if all(getattr(args, name) == value for name, value in PAPER_FLAGS.items()):  # the paper's model, else Table 3's
-        return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
-    return Table3Policy(obs_dim, act_dim, inputs, args)
+    return Policy(obs_dim, act_dim, args.history, args.hidden, inputs)
 
 
-def train_seed(args, demos: dict, seed: int, device) -> dict:  # its evaluations [(epoch, mean return)] and policy
-    both = "--two-stage trains the coarse model first, --no-coarse-action never uses it: pass one of them"
-    require(args.coarse_action or not args.two_stage, both)
+def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
+    """Row t holds [o_{t-H+1}, ..., o_t]; before an episode's start, its first frame repeated."""
+    index = np.arange(len(observations))
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    frames = []
+    for lag in range(history - 1, -1, -1):
+        frames.append(observations[np.maximum(index - lag, first_of_episode)])
+    return np.concatenate(frames, axis=1)
+
+
+def train_seed(args, demos: dict, seed: int, device) -> dict:
+    """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
     torch.manual_seed(seed)
     env = make_env(args.env)
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    dims = velocity_dims(env, args.env, args.velocity_dims)
-    noisy = partially_observe(demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed)
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
+    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    dims = velocity_dims(env, args.env)
+    noisy = partially_observe(
+        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
+    )
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
-    loss_name = "coarse" if args.two_stage else "Eq. 2" if args.coarse_action else "final"  # the loss train_step takes
 
-    def train_step(idx):  # an Adam step on Eq. 2, MSE(final, a_t) + MSE(zeta, a_t), or on one of its two terms
+    def train_step(idx):
+        # Eq. 2: the final action's and zeta's mean squared errors to the expert's actions, summed.
         zeta, final = policy.coarse_and_final(inputs[idx])
-        final_loss, coarse_loss = ((final - targets[idx]) ** 2).mean(), ((zeta - targets[idx]) ** 2).mean()
-        loss = {"Eq. 2": final_loss + coarse_loss, "final": final_loss, "coarse": coarse_loss}[loss_name]
+        final_loss = ((final - targets[idx]) ** 2).mean()
+        coarse_loss = ((zeta - targets[idx]) ** 2).mean()
+        loss = final_loss + coarse_loss
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         return loss
 
-    if args.two_stage:  # Table 3's two-stage training: first the coarse model alone on its loss, then frozen
-        print(f"seed {seed} | stage 1: the coarse model alone, on its loss (no evaluations)", flush=True)
-        fit(args, policy, optimizer, train_step, len(inputs), seed, device, evaluate_policy=False)
-        policy.coarse.requires_grad_(False)  # one Adam for both stages: it steps only the parameters with a gradient
-        loss_name = "final"
-        print(f"seed {seed} | stage 2: the coarse model frozen, the rest on the final loss", flush=True)
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
-    return dict(evaluations=evaluations, policy=policy, obs_dim=obs_dim, act_dim=act_dim, ms_per_step=ms_per_step)
+    return evaluations, policy, ms_per_step
 
 
-# ---- Table 3's ablations, and the capacity control: each flag changes only what it names ----
-PAPER_FLAGS = dict(fusion="late", coarse_output="action", coarse_input="current", policy_input="history")
-PAPER_FLAGS.update(stop_gradient=True, coarse_action=True)  # the model flags of Args (--two-stage is training's)
-
-
-class Table3Policy(nn.Module):  # Policy with the flags open; at PAPER_FLAGS the same layers, order, weights and outputs
-    def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
-        super().__init__()
-        frames = {"history": args.history, "current": 1}  # each model reads the whole history, or its last frame o_t
-        self.normalize, self.args, hidden, fusion = Normalizer(inputs), args, args.hidden, args.fusion
-        self.coarse_width, self.policy_width = obs_dim * frames[args.coarse_input], obs_dim * frames[args.policy_input]
-        self.coarse = mlp(self.coarse_width, act_dim, hidden)
-        fed = hidden if args.coarse_output == "feature" else act_dim  # width of what the coarse model passes on
-        self.policy_first = nn.Sequential(nn.Linear(self.policy_width + fed * (fusion == "early"), hidden), nn.ReLU())
-        width = act_dim if fusion == "output" else hidden  # what the policy MLP passes on (output: no last ReLU)
-        self.policy_rest = nn.Sequential(nn.Linear(hidden + fed * (fusion == "middle"), hidden), nn.ReLU())
-        if fusion != "penultimate":  # penultimate: BC-OH's MLP, sg(zeta) joined before its last layer (the head)
-            self.policy_rest.extend([nn.Linear(hidden, width)] + [nn.ReLU()] * (fusion != "output"))
-        self.head = nn.Linear(width + fed * (fusion in ("late", "penultimate", "output")), act_dim)
-
-    def coarse_model(self, obs_history):
-        feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
-        return self.coarse[-1](feature), feature
-
-    def coarse_and_final(self, obs_history):
-        args, (zeta, feature) = self.args, self.coarse_model(obs_history)
-        fed = feature if args.coarse_output == "feature" else zeta
-        fed = fed.detach() if args.stop_gradient else fed
-        fed = fed if args.coarse_action else torch.zeros_like(fed)  # the capacity control: no coarse information
-        join = lambda h, *stages: torch.cat([h, fed], dim=1) if args.fusion in stages else h  # noqa: E731
-        h = self.policy_first(join(self.normalize(obs_history)[:, -self.policy_width :], "early"))
-        h = self.policy_rest(join(h, "middle"))
-        return zeta, self.head(join(h, "late", "penultimate", "output"))
-
-    def forward(self, obs_history):
-        return self.coarse_and_final(obs_history)[1]
-
-
-# Copied from bc_oh.fit..stack_history
-def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True) -> tuple:
+# Copied from bc_oh.fit..run
+def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device) -> tuple:
+    """The training loop: random minibatches, a linearly decaying learning rate, evaluations."""
     steps_per_epoch = num_samples // args.batch_size
-    total_steps, step, evaluations, start, train_time = args.epochs * steps_per_epoch, 0, [], time.time(), 0.0
+    total_steps = args.epochs * steps_per_epoch
     generator = torch.Generator(device=device).manual_seed(seed)
-    workers, position = args.workers or 1, args.seeds.index(seed) if seed in args.seeds else 0  # for the job's ETA:
-    waves_after = (len(args.seeds) - 1) // workers - position // workers  # this seed's rest, then the waves after it
+    evaluations = []
+    step = 0
+    train_time = 0.0
+    start = time.time()
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            for group in optimizer.param_groups:  # each from its own initial rate, linearly to 0
-                group["lr"] = group.setdefault("initial_lr", group["lr"]) * (1 - step / total_steps)
-            loss = train_step(torch.randint(num_samples, (args.batch_size,), device=device, generator=generator))
+            # The learning rate decays linearly to 0 (section 8.3).
+            for group in optimizer.param_groups:
+                group["lr"] = args.learning_rate * (1 - step / total_steps)
+            idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
+            loss = train_step(idx)
             step += 1
-        last_loss = loss.item()  # also waits for the GPU, so train_time is the true training time
+        # item() waits for the GPU too, so train_time counts the whole training.
+        last_loss = loss.item()
         train_time += time.time() - epoch_start
         evaluating = epoch % args.eval_every == 0 or epoch == args.epochs
-        if evaluate_policy and evaluating:
+        if evaluating:
             policy.eval()
             returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
             evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
         if evaluating or epoch % max(1, args.epochs // 20) == 0:
-            last = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
-            line = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f} | last eval {last}"
-            eta = (time.time() - start) * (1 - epoch / args.epochs + waves_after) / (epoch / args.epochs) / 60
-            print(f"{line} | {1000 * train_time / step:.2f} ms/step | job ETA {eta:.1f} min", flush=True)
+            last_return = "n/a"
+            if evaluations:
+                last_return = f"{evaluations[-1][1]:.1f}"
+            ms_per_step = 1000 * train_time / step
+            minutes_left = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            progress = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f}"
+            progress += f" | last eval {last_return} | {ms_per_step:.2f} ms/step"
+            print(f"{progress} | {minutes_left:.1f} min left", flush=True)
     return evaluations, 1000 * train_time / step
 
 
 # ---- Evaluation ----
 @torch.no_grad()
-def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:  # the deterministic policy's returns
-    dims, skip = velocity_dims(make_env(args.env), args.env, args.velocity_dims), args.frame_skip
-    noise = (args.obs_noise_std, args.hide_velocities)
-    makers = [lambda i=i: PartialObservation(make_env(args.env, skip), dims, *noise, seed + i) for i in range(episodes)]
-    envs = gym.vector.SyncVectorEnv(makers, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-    low, high = envs.single_action_space.low, envs.single_action_space.high
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
+    """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
+    dims = velocity_dims(make_env(args.env), args.env)
+    env_fns = [functools.partial(make_sensor_env, args, dims, seed + i) for i in range(episodes)]
+    autoreset = gym.vector.AutoresetMode.SAME_STEP
+    envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
+    low = envs.single_action_space.low
+    high = envs.single_action_space.high
     obs, _ = envs.reset(seed=seed)
-    frames = np.repeat(obs[:, None], args.history, axis=1)  # [o_{t-H+1}, ..., o_t]: stack_history's first-frame rule
-    returns, running = np.zeros(episodes), np.ones(episodes, bool)
+    # The history starts as the first frame repeated, as stack_history does.
+    frames = np.repeat(obs[:, None], args.history, axis=1)
+    returns = np.zeros(episodes)
+    running = np.ones(episodes, dtype=bool)
     while running.any():
         inputs = torch.as_tensor(frames.reshape(episodes, -1), dtype=torch.float32, device=device)
-        obs, reward, terminated, truncated, _ = envs.step(policy(inputs).cpu().numpy().clip(low, high))
-        returns += reward * running
-        running &= ~(terminated | truncated)  # each env plays one episode: what follows its end does not count
+        actions = policy(inputs).cpu().numpy().clip(low, high)
+        obs, reward, terminated, truncated, _ = envs.step(actions)
+        # Each env plays one episode: what comes after its end does not count.
+        returns[running] += reward[running]
+        running &= ~(terminated | truncated)
         frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
     envs.close()
     return returns.tolist()
 
 
-# ---- Shared plumbing, identical in every method file (scripts/check_copies.py): seeds, env, demos ----
-def run(args):  # check the input, load the demos, train each seed not yet finished (each written when it ends)
-    for key in "history epochs batch_size hidden eval_every eval_episodes learning_rate frame_skip workers".split():
-        value, flag = getattr(args, key, None), f"--{key.replace('_', '-')}"  # the flags every method shares
-        require(value is None or value > 0, f"{flag} must be positive, got {value}: pass one, or leave it out")
-    require(args.obs_noise_std >= 0, f"--obs-noise-std must be >= 0, got {args.obs_noise_std}: 0 gives no noise")
-    seeds = " ".join(map(str, args.seeds)) or "none"
-    require(len(set(args.seeds)) == len(args.seeds) > 0, f"--seeds needs distinct seeds, got {seeds}: e.g. 1 2 3")
-    samples, batch = args.num_demo_samples, args.batch_size
-    require(samples is None or samples > batch, f"--num-demo-samples must exceed --batch-size {batch}, got {samples}")
-    require(not args.cuda or torch.cuda.is_available(), "--cuda, but torch sees no CUDA GPU here: drop --cuda")
-    name = run_name(args)  # before the defaults are filled in: it names what the user changed
-    env = make_env(args.env)
-    velocity_dims(env, args.env, args.velocity_dims)  # fail early for envs of unknown layout
-    args.frame_skip = args.frame_skip or getattr(env.unwrapped, "frame_skip", None)  # recorded with the results
-    make_env(args.env, args.frame_skip)  # fail early for a frame skip the env cannot take
-    args.learning_rate = args.learning_rate or (1e-5 if args.env.startswith("Hopper") else 1e-4)
-    demos, meta = load_demos(args, env)
-    output_dir = args.output_dir.format(method=METHOD, run_name=name, env=args.env)
-    os.makedirs(output_dir, exist_ok=True)
-    per_seed = {seed: finished_seed(output_dir, seed, args) for seed in args.seeds}
-    kept, to_train = [s for s in args.seeds if per_seed[s]], [s for s in args.seeds if not per_seed[s]]
-    if kept:
-        print(f"seeds {', '.join(map(str, kept))}: kept their finished results in {output_dir} (delete to retrain)")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    args.workers = 1 if args.cuda else max(1, min(args.workers or cores, len(to_train)))  # the GPU: one seed at a time
-    if len(to_train) > args.workers:
-        waiting = ", ".join(map(str, to_train[args.workers :]))
-        print(f"seeds {', '.join(map(str, to_train[: args.workers]))} training; {waiting} wait for a worker")
-    jobs = [(replace(args, seeds=to_train), demos, seed, output_dir) for seed in to_train]  # the ETA counts to_train
+# ---- The env and its partial observability (section 5.1) ----
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
+    """The gymnasium env, at another control rate when frame_skip is given."""
+    if "-v" not in env_id:
+        raise UsageError(f"env {env_id!r} has no version: use {env_id}-v4 (the paper's) or -v5")
     try:
-        if args.workers == 1:
-            entries = [train_and_record(*job) for job in jobs]
-        else:  # spawn, not fork: torch and MuJoCo are not fork-safe
-            with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
-                entries = pool.starmap(train_and_record, jobs, chunksize=1)
-    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (made one in __main__): leaving the pool stops its workers
-        lost = [s for s in to_train if not finished_seed(output_dir, s, args)]
-        done, lost = [s for s in args.seeds if s not in lost] or ["none"], lost or ["none"]
-        where = f"seeds {', '.join(map(str, done))} finished and kept, {', '.join(map(str, lost))} lost"
-        sys.exit(f"interrupted: {where}: the same command trains only those")
-    per_seed.update(zip(to_train, entries))
-    result_path, scores = write_result(output_dir, args, per_seed), [entry["score"] for entry in per_seed.values()]
-    print(f"\n{'seed':>6} | {'score':>8}\n" + "\n".join(f"{s:>6} | {per_seed[s]['score']:8.1f}" for s in per_seed))
-    mean, plural, skip = np.mean(scores), "s" * (len(scores) > 1), meta.get("expert_frame_skip")
-    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} seed{plural}"
-    if "expert_return" in meta:  # demos from elsewhere (e.g. Minari) have no expert to compare with
-        share = round(mean / meta["expert_return"], 2) + 0.0  # + 0.0: a share of -0.001 reads 0%, not -0%
-        rate = "" if skip == args.frame_skip else f" at its own frame skip {skip}"
-        line += f", {share:.0%} of the expert's {meta['expert_return']:.0f}{rate}"
-    print(f"result: {result_path}\n{line}")
+        env = gym.make(env_id)
+    except Exception as error:
+        # gymnasium raises several error types for unknown or broken ids.
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
+    # The same duration of an episode, and the same scale of returns, at the new rate.
+    steps = round(env.spec.max_episode_steps * native / frame_skip)
+    env = gym.make(env_id, max_episode_steps=steps)
+    env.unwrapped.frame_skip = frame_skip
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
 
 
-def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
-    torch.set_num_threads(1)  # small networks gain nothing from more; first: a worker starts with all the cores
-    if multiprocessing.parent_process():  # a pool worker: Ctrl-C is the main process's, a printed line one write
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        sys.stdout.reconfigure(line_buffering=True, write_through=False)  # unbuffered, print's "\n" is a write apart
-    print(f"seed {seed} | training", flush=True)
-    result = train_seed(args, demos, seed, torch.device("cuda" if args.cuda else "cpu"))
-    score = float(np.mean([ret for _, ret in result["evaluations"][-3:]]))  # the paper: mean of the last 3
-    entry = {"score": score, "evaluations": result["evaluations"], "ms_per_step": result["ms_per_step"]}
-    if args.save_model:
-        model = {"method": METHOD, "env_id": args.env, "args": asdict(args), "obs_dim": result["obs_dim"]}
-        model.update(act_dim=result["act_dim"], state_dict=result["policy"].cpu().state_dict())
-        path = os.path.join(output_dir, f"seed{seed}.pt")
-        torch.save(model, f"{path}.tmp")
-        os.replace(f"{path}.tmp", path)  # an interrupted run leaves no half-written checkpoint
-    write_result(output_dir, args, {seed: entry})  # now: a rerun keeps this seed
-    return entry
+V4_VELOCITIES = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
+"""the velocity entries [start, end) of the v4 envs' observations"""
 
 
-def run_name(args) -> str:  # METHOD, then each flag changed from its default that changes results (c2f__fusion-early)
-    defaults, changed = type(args)(), []
-    for name, value in asdict(args).items():
-        if name in ("seeds", "workers", "output_dir", "save_model", "cuda") or value == getattr(defaults, name):
-            continue
-        flag, text = name.replace("_", "-"), "-".join(map(str, value)) if isinstance(value, list) else str(value)
-        text = os.path.basename(text).removesuffix(".npz")
-        changed.append(flag if value is True else f"no-{flag}" if value is False else f"{flag}-{text}")
-    return "__".join([METHOD, *changed])
-
-
-def finished_seed(output_dir: str, seed: int, args) -> dict | None:
-    ignored = ("seeds", "workers", "output_dir", "cuda", "save_model")  # flags that change no result
-    try:
-        result = json.loads(Path(output_dir, f"result_seeds{seed}.json").read_text())
-        (entry,) = result["scores"].values()
-        recorded = {name: value for name, value in result["args"].items() if name not in ignored}
-    except Exception:  # none yet, half written, or not one of ours: train the seed
-        return None
-    same = recorded == {name: value for name, value in asdict(args).items() if name not in ignored}
-    model = os.path.join(output_dir, f"seed{seed}.pt")
-    return entry if same and (os.path.isfile(model) or not args.save_model) else None
-
-
-def write_result(output_dir: str, args, per_seed: dict, **more) -> str:  # result_seeds<seeds>.json: scores, mean, std
-    scores, recorded = [entry["score"] for entry in per_seed.values()], {**asdict(args), "seeds": list(per_seed)}
-    recorded["output_dir"] = os.path.relpath(output_dir)  # relative: no machine named
-    result = dict(env=args.env, method=METHOD, args=recorded, scores=per_seed, mean=np.mean(scores), std=np.std(scores))
-    path = Path(output_dir, f"result_seeds{'-'.join(map(str, per_seed))}.json")
-    path.write_text(json.dumps({**result, **more}, indent=1))  # written plainly: a reader refuses a half-written file
-    return str(path)
-
-
-class UsageError(Exception): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
-
-
-def require(condition, message: str):  # refuse bad input in one line: a UsageError unless condition holds
-    if not condition:
-        raise UsageError(message)
-
-
-def velocity_dims(env: gym.Env, env_id: str, override=None) -> list:  # the joint velocities: where the noise goes
-    obs_dim, structure = env.observation_space.shape[0], getattr(env.unwrapped, "observation_structure", None)
-    if override:
-        require(0 <= min(override) and max(override) < obs_dim, f"--velocity-dims must lie in [0, {obs_dim - 1}]")
-        return sorted(set(override))
-    if structure:  # v5 envs describe their layout: positions first, then the qvel block
+def velocity_dims(env: gym.Env, env_id: str) -> list:
+    """The indices of the joint velocities in an observation: where the noise goes."""
+    structure = getattr(env.unwrapped, "observation_structure", None)
+    if structure:
+        # v5 envs describe their layout: positions first, then the qvel block.
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
-    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}  # the v4 envs' _get_obs
-    require(env_id.split("-")[0] in known, f"velocity entries of {env_id} are unknown: name them with --velocity-dims")
-    return list(range(*known[env_id.split("-")[0]]))
+    family = env_id.split("-")[0]
+    if family not in V4_VELOCITIES:
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use a v5 env")
+    start, end = V4_VELOCITIES[family]
+    return list(range(start, end))
 
 
-class PartialObservation(gym.ObservationWrapper):  # the sensor: fresh N(0, std^2) velocity noise each step, or zeros
+class PartialObservation(gym.ObservationWrapper):
+    """The sensor: fresh N(0, std^2) noise on the velocities at each step, or zeros there."""
+
     def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
         super().__init__(env)
-        self.dims, self.std, self.hide, self.rng = np.asarray(dims), std, hide, np.random.default_rng(seed)
+        self.dims = np.asarray(dims)
+        self.std = std
+        self.hide = hide
+        self.rng = np.random.default_rng(seed)
 
     def observation(self, obs):
         obs = np.array(obs, dtype=np.float64)
-        obs[self.dims] = 0.0 if self.hide else obs[self.dims] + self.rng.normal(0.0, self.std, len(self.dims))
+        if self.hide:
+            obs[self.dims] = 0.0
+        else:
+            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
         return obs
 
 
-def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
-    try:
-        env = gym.make(env_id)
-    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
-        raise UsageError(f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4")
-    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
-    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
-    if frame_skip is None or frame_skip == native:
-        return env
-    require(native is not None, f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out")
-    env = gym.make(env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip))  # the same time
-    env.unwrapped.frame_skip = frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)  # and the same return scale
+def make_sensor_env(args, dims: list, seed: int) -> gym.Env:
+    env = make_env(args.env, args.frame_skip)
+    return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
 
 
-def load_demos(args, env: gym.Env) -> tuple:  # (demos, meta) of --demos or `expert_ppo.py --make-demos`, checked
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    native = getattr(env.unwrapped, "frame_skip", None)
-    n, rate = args.num_demo_samples or (20000 if args.env.startswith("Hopper") else 10000), args.frame_skip
-    path = args.demos or f"demos/{args.env}{'' if rate == native else f'_fs{rate}'}_{n}.npz"
-    make = f"python expert_ppo.py --env {args.env} --make-demos{f' --frame-skip {rate}' * (rate != native)}"
-    make += f" --num-demo-samples {n}" * bool(args.num_demo_samples)
-    where = f"demo file {path} not found in {os.getcwd()}"  # relative paths: the repository root holds demos/
-    require(os.path.isfile(path), f"{where}: " + ("check the path" if args.demos else f"run {make}"))
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"])) if "meta" in data else {}
-            demos = {key: data[key] for key in ("observations", "actions", "episode_starts") if key in data}
-    except Exception as error:
-        raise UsageError(f"{path} is not a readable demo file ({type(error).__name__}): see the format in README.md")
-    made_for, made_at = meta.get("env_id", args.env), meta.get("frame_skip", native)  # no record: the native rate
-    require(made_for == args.env, f"{path} holds demos of {made_for}: pass --env {made_for}, or demos of {args.env}")
-    require(made_at == rate, f"{path} was made at frame skip {made_at}, not {rate}: pass --frame-skip {made_at}")
-    for key in ("observations", "actions", "episode_starts"):
-        require(key in demos, f"{path} has no {key!r} array: see the .npz format in README.md")
-        require(demos[key].dtype.kind in "biuf", f"{path}: {key} hold {demos[key].dtype} values: save them as numbers")
-    obs, actions, starts = demos["observations"], demos["actions"], demos["episode_starts"]
-    turned = (obs_dim, act_dim) == (len(obs), len(actions))
-    fix = "save them as (steps, entries), not transposed" if turned else "use demos of this env"
-    need = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
-    shapes = f"observations {obs.shape} and actions {actions.shape}, but {need}"
-    require((obs.shape[1:], actions.shape[1:]) == ((obs_dim,), (act_dim,)), f"{path} holds {shapes}: {fix}")
-    rows = f"observations, actions and episode_starts have {len(obs)}, {len(actions)} and {len(starts)} rows"
-    require(len(obs) == len(actions) == len(starts) and starts.ndim == 1, f"{path}: {rows}: save one row per step")
-    take = args.num_demo_samples or len(obs)  # with --demos: the first N steps, or all
-    require(len(obs) >= take, f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer")
-    batch = "not more than a batch: use more, or a smaller --batch-size"
-    require(take > args.batch_size, f"{path} holds {take} steps, {batch}")
-    first = f" (the first {take} of its {len(obs)})" * (take < len(obs))
-    obs, actions, starts = obs[:take].astype(np.float64), actions[:take].astype(np.float32), starts[:take].astype(bool)
-    for key, values in (("observations", obs), ("actions", actions)):
-        bad = np.unique(np.argwhere(~np.isfinite(values))[:, 0])  # each row once
-        require(not len(bad), f"{path}: {key} hold non-finite values at rows {bad[:3].tolist()}: fix or drop them")
-    low, high = env.action_space.low, env.action_space.high
-    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
-    bounds = f"lie outside the bounds [{low.min():g}, {high.max():g}]: rescale or clip them"
-    require(not len(outside), f"{path}: actions of rows {outside[:3].tolist()} {bounds}")
-    require(starts[0], f"{path}: episode_starts[0] is False: it is True on each episode's first step")
-    step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)  # MSE(a_t-1, a_t), within episodes
-    copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()  # / Var(a): near 0, a shortcut; near 2, none
-    shortcut = f"copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f}"
-    print(f"demos: {len(obs)} steps from {path}{first}; {shortcut} (near 0: copying the last action is a shortcut)")
-    return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
-
-
-def partially_observe(observations: np.ndarray, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    observed, rng = observations.copy(), np.random.default_rng(seed)  # the sensor's view: noise drawn once per sample
-    observed[:, dims] = 0.0 if hide else observed[:, dims] + rng.normal(0.0, std, (len(observed), len(dims)))
+def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
+    """What the sensor shows of the demos: the same noise, drawn once per sample."""
+    observed = observations.copy()
+    rng = np.random.default_rng(seed)
+    if hide:
+        observed[:, dims] = 0.0
+    else:
+        observed[:, dims] += rng.normal(0.0, std, (len(observed), len(dims)))
     return observed
 
 
-def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    index = np.arange(len(observations))  # row t: [o_{t-H+1}, ..., o_t], oldest first
-    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))  # before it, repeat its first frame
-    frames = [observations[np.maximum(index - lag, first_of_episode)] for lag in range(history - 1, -1, -1)]
-    return np.concatenate(frames, axis=1)
+def print_mujoco_warning(text: str):
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah model each time it is made: skip that one.
+    if "settotalmass" not in text:
+        print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-gym.logger.min_level = gym.logger.ERROR  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
-# MuJoCo 3.x warns of gymnasium's HalfCheetah XML (to ./MUJOCO_LOG.TXT too) each time it is made: drop that one
-mujoco.set_mju_user_warning(lambda text: "settotalmass" in text or print(f"MuJoCo warning: {text}", file=sys.stderr))
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
+mujoco.set_mju_user_warning(print_mujoco_warning)
+
+
+# ---- The demonstrations, checked: a wrong file must not give a silently wrong result ----
+def load_demos(args, env: gym.Env) -> tuple:
+    """(demos, meta) from --demos or from the file `expert_ppo.py --make-demos` writes."""
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
+    native = getattr(env.unwrapped, "frame_skip", None)
+    # The paper's demo sizes (section 5.1): 20k steps for Hopper, 10k for the others.
+    n = args.num_demo_samples
+    if n is None:
+        n = 10000
+        if args.env.startswith("Hopper"):
+            n = 20000
+    path = args.demos
+    if path is None and args.frame_skip == native:
+        path = f"demos/{args.env}_{n}.npz"
+    elif path is None:
+        path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
+    make = f"expert_ppo.py --env {args.env} --frame-skip {args.frame_skip} --num-demo-samples {n}"
+    if not os.path.isfile(path):
+        where = f"demo file {path} not found in {os.getcwd()}"
+        raise UsageError(f"{where}: check --demos, or make it: python {make} --make-demos")
+    demos = {}
+    meta = {}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "meta" in data:
+                meta = json.loads(str(data["meta"]))
+            for key, dtype in [("observations", np.float64), ("actions", np.float32)]:
+                if key in data:
+                    demos[key] = data[key].astype(dtype)
+            if "episode_starts" in data:
+                demos["episode_starts"] = data["episode_starts"].astype(bool)
+    except Exception as error:
+        # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
+        message = f"{path} is not a readable demo file ({type(error).__name__})"
+        raise UsageError(f"{message}: see the format in README.md")
+    # A file without meta loads: it was made by someone else, at the env's own rate.
+    made_for = meta.get("env_id", args.env)
+    made_at = meta.get("frame_skip", native)
+    if made_for != args.env:
+        raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
+    if made_at != args.frame_skip:
+        raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
+    for key in ["observations", "actions", "episode_starts"]:
+        if key not in demos:
+            raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
+    obs = demos["observations"]
+    actions = demos["actions"]
+    starts = demos["episode_starts"]
+    if obs.shape[1:] != (obs_dim,) or actions.shape[1:] != (act_dim,):
+        raise UsageError(
+            f"{path} holds observations {obs.shape} and actions {actions.shape}, "
+            f"but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env"
+        )
+    if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
+        raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
+    take = args.num_demo_samples or len(obs)
+    if len(obs) < take:
+        raise UsageError(
+            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
+        )
+    if take <= args.batch_size:
+        raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
+    obs = obs[:take]
+    actions = actions[:take]
+    starts = starts[:take]
+    for key, values in [("observations", obs), ("actions", actions)]:
+        bad_rows = np.unique(np.argwhere(~np.isfinite(values))[:, 0])
+        if len(bad_rows):
+            rows = bad_rows[:3].tolist()
+            raise UsageError(f"{path}: {key} hold non-finite values at rows {rows}: fix them")
+    low = env.action_space.low
+    high = env.action_space.high
+    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
+    if len(outside):
+        raise UsageError(
+            f"{path}: actions of rows {outside[:3].tolist()} lie outside the bounds "
+            f"[{low.min():g}, {high.max():g}]: rescale or clip them"
+        )
+    if not starts[0]:
+        raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
+
+    # How well copying the last action imitates the expert: MSE(a_{t-1}, a_t) within episodes,
+    # divided by Var(a). It is 0 if actions never change, about 2 if they are unrelated.
+    step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
+    copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
+    note = ""
+    if take < len(demos["actions"]):
+        note = f" (the first {take} of its {len(demos['actions'])})"
+    print(f"demos: {take} steps from {path}{note}")
+    print(
+        f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} "
+        "(0: copying the last action is perfect; about 2: it is useless)"
+    )
+    return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
+
+
+# ---- Seeds and main: each seed in its own process, its result written when it ends ----
+def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
+    """Train one seed, save its policy if asked, and write its result at once."""
+    # Small networks gain nothing from more threads; a pool worker starts with all the cores.
+    torch.set_num_threads(1)
+    print(f"seed {seed} | training", flush=True)
+    device = torch.device("cuda" if args.cuda else "cpu")
+    evaluations, policy, ms_per_step = train_seed(args, demos, seed, device)
+    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
+    entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
+    if args.save_model:
+        checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args)}
+        checkpoint["obs_dim"] = demos["observations"].shape[1]
+        checkpoint["act_dim"] = demos["actions"].shape[1]
+        checkpoint["state_dict"] = policy.cpu().state_dict()
+        path = os.path.join(output_dir, f"seed{seed}.pt")
+        # Write a temporary file, then rename it: an interrupted run leaves no half-written file.
+        torch.save(checkpoint, f"{path}.tmp")
+        os.replace(f"{path}.tmp", path)
+    write_result(output_dir, args, {seed: entry})
+    return entry
+
+
+def write_result(output_dir: str, args, per_seed: dict) -> str:
+    """Write result_seeds<seeds>.json: the args, each seed's score and evaluations, mean and std."""
+    scores = [entry["score"] for entry in per_seed.values()]
+    recorded = asdict(args)
+    recorded["seeds"] = list(per_seed)
+    recorded["output_dir"] = os.path.relpath(output_dir)
+    result = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed}
+    result["mean"] = np.mean(scores)
+    result["std"] = np.std(scores)
+    seeds = "-".join(str(seed) for seed in per_seed)
+    path = Path(output_dir, f"result_seeds{seeds}.json")
+    path.write_text(json.dumps(result, indent=1))
+    return str(path)
+
+
+def start_worker():
+    # Ctrl-C reaches every process of the job; the main process alone handles it.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # One write a printed line, so the lines of parallel seeds do not mix.
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)
+
+
+def run(args):
+    """Check the flags, load the demos, train every seed, print the table and mean ± std."""
+    # Sizes must be positive; None leaves a flag at its default.
+    sizes = ["history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"]
+    for name in sizes + ["learning_rate", "frame_skip", "num_demo_samples", "workers"]:
+        value = getattr(args, name)
+        if value is not None and value <= 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {value}")
+    if args.obs_noise_std < 0:
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+    if len(args.seeds) == 0 or len(set(args.seeds)) < len(args.seeds):
+        raise UsageError(f"--seeds needs distinct seeds, got {args.seeds}: e.g. --seeds 1 2 3")
+    if args.cuda and not torch.cuda.is_available():
+        raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
+
+    env = make_env(args.env)
+    velocity_dims(env, args.env)
+    # Fill in the per-env defaults, so that the results record them.
+    if args.frame_skip is None:
+        args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
+    make_env(args.env, args.frame_skip)
+    # The paper's learning rates (section 8.3): 1e-5 for Hopper, 1e-4 for the others.
+    if args.learning_rate is None:
+        args.learning_rate = 1e-4
+        if args.env.startswith("Hopper"):
+            args.learning_rate = 1e-5
+    demos, meta = load_demos(args, env)
+    output_dir = args.output_dir
+    if output_dir is None:
+        output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
+    os.makedirs(output_dir, exist_ok=True)
+
+    workers = min(args.workers or os.cpu_count(), len(args.seeds))
+    if args.cuda:
+        workers = 1
+    jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
+    try:
+        if workers == 1:
+            entries = [train_and_record(*job) for job in jobs]
+        else:
+            # spawn, not fork: torch and MuJoCo are not fork-safe.
+            context = multiprocessing.get_context("spawn")
+            with context.Pool(workers, initializer=start_worker) as pool:
+                entries = pool.starmap(train_and_record, jobs, chunksize=1)
+    except KeyboardInterrupt:
+        # Leaving the pool's block has stopped the workers; the finished seeds' results stay.
+        finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
+        message = "interrupted: no seed finished"
+        if finished:
+            message = f"interrupted: seeds {finished} finished, their results are in {output_dir}"
+        print(message, file=sys.stderr)
+        sys.exit(130)
+
+    per_seed = dict(zip(args.seeds, entries))
+    result_path = write_result(output_dir, args, per_seed)
+    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations)")
+    for seed, entry in per_seed.items():
+        print(f"{seed:>6} | {entry['score']:.1f}")
+    scores = [entry["score"] for entry in per_seed.values()]
+    mean = np.mean(scores)
+    seeds = "seed" if len(scores) == 1 else "seeds"
+    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} {seeds}"
+    # Demos from elsewhere (e.g. Minari) have no expert to compare with.
+    if "expert_return" in meta:
+        line += f", {mean / meta['expert_return']:.0%} of the expert's {meta['expert_return']:.0f}"
+    print(f"result: {result_path}")
+    print(line)
 
 
 if __name__ == "__main__":
-    signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill PID` stops the job as Ctrl-C does
+    # `kill PID` stops the job as Ctrl-C does.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         run(tyro.cli(Args))
     except UsageError as error:

@@ -31,8 +31,7 @@ gym.logger.min_level = gym.logger.ERROR
 
 
 def print_mujoco_warning(text: str):
-    # MuJoCo 3.x warns about gymnasium's HalfCheetah XML each time that env is made (and writes it
-    # to ./MUJOCO_LOG.TXT): drop that warning and print any other.
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah XML each time it is made: drop that one.
     if "settotalmass" not in text:
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
@@ -146,24 +145,18 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
 
 
 def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:
-    """The frame skip of make_env(env_id, frame_skip); None for an env that is not MuJoCo.
-    It makes one env, so that bad input fails here, before any work."""
-    # make_env would divide by it, or make a negative time limit.
-    if frame_skip is not None and frame_skip <= 0:
-        raise UsageError(
-            f"--frame-skip must be positive, got {frame_skip}: "
-            "e.g. 1, or leave it out for the env's own"
-        )
+    """The frame skip of make_env(env_id, frame_skip), None if not MuJoCo; bad input fails here."""
+    fix = "e.g. 1, or leave it out for the env's own"
+    positive = frame_skip is None or frame_skip > 0
+    require(positive, f"--frame-skip must be positive, got {frame_skip}: {fix}")
     env = make_env(env_id, frame_skip)
-    # make_env set it to frame_skip when one was given.
     resolved = getattr(env.unwrapped, "frame_skip", None)
     env.close()
     return resolved
 
 
 class RunningMeanStd:
-    """Running mean and variance (the parallel algorithm of Chan et al.), as in gymnasium's
-    observation and reward normalisers."""
+    """Running mean and variance (parallel algorithm of Chan et al.), as gymnasium's normalisers."""
 
     def __init__(self, shape=()):
         self.mean = np.zeros(shape)
@@ -177,10 +170,8 @@ class RunningMeanStd:
         delta = batch_mean - self.mean
         total = self.count + batch_count
         self.mean = self.mean + delta * batch_count / total
-        old_sum = self.var * self.count
-        batch_sum = batch_var * batch_count
         correction = delta**2 * self.count * batch_count / total
-        self.var = (old_sum + batch_sum + correction) / total
+        self.var = (self.var * self.count + batch_var * batch_count + correction) / total
         self.count = total
 
     def normalize(self, x: np.ndarray) -> np.ndarray:
@@ -226,14 +217,8 @@ class ExpertPolicy(nn.Module):
         obs_dim = checkpoint["obs_shape"][0]
         act_dim = checkpoint["action_shape"][0]
         hidden = checkpoint["hidden"]
-        # The actor's mean, as in Agent.
-        hidden_layers = [
-            nn.Linear(obs_dim, hidden),
-            nn.Tanh(),
-            nn.Linear(hidden, hidden),
-            nn.Tanh(),
-        ]
-        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))
+        layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
+        self.net = nn.Sequential(*layers, nn.Linear(hidden, act_dim))
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
@@ -242,10 +227,9 @@ class ExpertPolicy(nn.Module):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
         obs = obs[..., : len(self.obs_mean)]
-        obs = (obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)
-        obs = obs.clamp(-10.0, 10.0)
-        action = self.net(obs)
-        return torch.maximum(torch.minimum(action, self.action_high), self.action_low)
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        # The actor's mean action, clipped to the action bounds.
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
 
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
@@ -293,7 +277,6 @@ def write_atomically(path: str, write):
             write(file)
         os.replace(tmp, path)
     finally:
-        # After an interruption, remove the half-written temporary file.
         if os.path.exists(tmp):
             os.remove(tmp)
 
@@ -333,7 +316,6 @@ def retargeted_expert(path: str, env_id: str):
     """--retarget: the expert at path and the env it was made for. Refused unless that is another
     version of env_id (Hopper-v4 for Hopper-v5) with the same action shape and observation, or one
     that is its leading positions and velocities (Ant-v4's 27 entries of Ant-v5's 105)."""
-    # For an unreadable file, load_expert says what is wrong with it.
     made_for = checkpoint_env(path) or env_id
     policy = load_expert(path, made_for)
     env = make_env(env_id)
@@ -352,35 +334,27 @@ def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
     native = env_frame_skip(args.env)
     if args.frame_skip is not None:
-        # Fail early for a frame skip the env cannot take.
         env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
     # An expert for another version of --env (Hopper-v4 for Hopper-v5) needs --retarget.
     recorded = checkpoint_env(path)
     same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
-    if same_family and recorded != args.env and not args.retarget:
-        raise UsageError(
-            f"{path} is an expert for {recorded}, not {args.env}: "
-            f"pass --retarget to evaluate it on {args.env} (and --ship-to to ship it there), "
-            f"or a checkpoint made for {args.env}"
-        )
-    # load_expert checks that the file is a readable checkpoint made for --env
-    # (with --retarget: for its family).
+    other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
+    fix = f"on {args.env} (and --ship-to to ship it there), or a checkpoint made for {args.env}"
+    require(args.retarget or recorded == args.env or not same_family, f"{other} {fix}")
+    # load_expert checks that the file is a readable checkpoint made for --env (or its family).
     if args.retarget:
         policy, made_for = retargeted_expert(path, args.env)
     else:
         policy = load_expert(path, args.env)
         made_for = args.env
     checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-    # A policy acts well at the rate it was trained at: evaluate there unless told otherwise.
-    # Checkpoints without the record were trained at the env's own rate.
+    # A policy acts well at the rate it was trained at (the env's own, if not recorded).
     trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
-    if args.ship_to and frame_skip != trained_at:
-        raise UsageError(
-            f"{path} was trained at frame skip {trained_at}: --ship-to records its return there, "
-            f"drop --frame-skip {frame_skip} or --ship-to"
-        )
+    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
+    fix = f"drop --frame-skip {frame_skip} or --ship-to"
+    require(not args.ship_to or frame_skip == trained_at, f"{there}, {fix}")
     # Said only at another rate, so that the default output stays as it was.
     if frame_skip != native:
         rates = f"the env's own is {native}; the expert was trained at {trained_at}"
@@ -392,13 +366,9 @@ def eval_only(args: Args):
     std = float(np.std(returns))
     if args.ship_to:
         # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
-        checkpoint["eval_return"] = mean
-        checkpoint["eval_std"] = std
-        checkpoint["eval_episodes"] = len(returns)
+        checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
         if made_for != args.env:
-            # Shipped for --env: load_expert accepts it there, and it says where it came from.
-            checkpoint["env_id"] = args.env
-            checkpoint["retargeted_from"] = made_for
+            checkpoint.update(env_id=args.env, retargeted_from=made_for)
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
@@ -406,9 +376,8 @@ def eval_only(args: Args):
 
 # ---- Demonstrations (--make-demos): the input of the imitation files ----
 def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert on the clean env; the budget truncates the last episode.
-    Besides o_t, a_t and the episode starts, it keeps what a dataset format such as Minari needs:
-    each step's reward, termination and truncation, and each episode's last observation."""
+    """Roll out the deterministic expert on the clean env. Besides o_t, a_t and the episode starts,
+    it keeps what Minari needs: rewards, terminations, truncations, final observations."""
     env = make_env(env_id, frame_skip)
     steps = []
     final_observations = []
@@ -418,8 +387,7 @@ def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int 
         action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
         next_obs, reward, terminated, truncated, _ = env.step(action)
         # The budget ends the last episode.
-        if step == num_samples - 1:
-            truncated = True
+        truncated = truncated or step == num_samples - 1
         steps.append((obs, action, start, reward, terminated, truncated))
         obs = next_obs
         start = terminated or truncated
@@ -441,15 +409,12 @@ def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int 
 
 def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
     """Where --make-demos writes, and where the imitation files look when --demos is not given."""
-    rate = ""
-    if frame_skip != native:
-        rate = f"_fs{frame_skip}"
+    rate = "" if frame_skip == native else f"_fs{frame_skip}"
     return f"demos/{env_id}{rate}_{num_samples}.npz"
 
 
 def make_demos(args: Args):
-    """Roll the expert out into demos/, with a meta naming the expert (its SHA-256) and its return.
-    A file made from the same expert file with the same settings is kept."""
+    """Roll the expert out into demos/, unless a file of the same expert and settings is there."""
     native = env_frame_skip(args.env)
     frame_skip = env_frame_skip(args.env, args.frame_skip)
     # The paper's sample counts: 20000 for Hopper, 10000 for the other envs.
@@ -459,7 +424,6 @@ def make_demos(args: Args):
     require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
     expert_path = args.checkpoint.format(env=args.env)
     path = demo_path(args.env, frame_skip, native, num_samples)
-    # One clear line for a missing or wrong checkpoint.
     expert = load_expert(expert_path, args.env)
     with open(expert_path, "rb") as file:
         expert_sha256 = hashlib.sha256(file.read()).hexdigest()
@@ -478,13 +442,12 @@ def make_demos(args: Args):
         with np.load(path, allow_pickle=False) as data:
             made = json.loads(str(data["meta"]))
     except Exception:
-        # None yet, or not one of ours: make it.
         made = {}
     settings = ("env_id", "expert_sha256", "num_samples", "frame_skip")
     if all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    # An expert not shipped with --eval-only --ship-to has no return to compare with.
+    # An expert not shipped by --eval-only --ship-to has no return.
     if meta["expert_return"] is None:
         del meta["expert_return"]
         del meta["expert_frame_skip"]
@@ -517,9 +480,7 @@ def train(args: Args):
     native = env_frame_skip(args.env)
     # Resolved first, so that args and checkpoints record the rate used.
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
-    rate = ""
-    if args.frame_skip != native:
-        rate = f"_fs{args.frame_skip}"
+    rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
     latest_path = os.path.join(output_dir, "latest.pt")
     best_path = os.path.join(output_dir, "best.pt")
@@ -528,17 +489,15 @@ def train(args: Args):
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
 
-    # SAME_STEP autoreset: a step that ends an episode returns the *reset* observation and puts the
-    # last one in info["final_obs"]. So every stored transition belongs to one episode, and a
-    # truncated episode bootstraps from V(final_obs).
+    # SAME_STEP autoreset: a step that ends an episode returns the reset observation and puts the
+    # last one in info["final_obs"], from which a truncated episode bootstraps.
     envs = gym.vector.SyncVectorEnv(
         [lambda: make_env(args.env, args.frame_skip) for _ in range(args.num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     obs_dim = envs.single_observation_space.shape[0]
     act_dim = envs.single_action_space.shape[0]
-    action_low = envs.single_action_space.low
-    action_high = envs.single_action_space.high
+    action_low, action_high = envs.single_action_space.low, envs.single_action_space.high
     agent = Agent(obs_dim, act_dim, args.hidden)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     obs_rms = RunningMeanStd((obs_dim,))
@@ -547,17 +506,15 @@ def train(args: Args):
     best_return = -np.inf
 
     if args.resume and os.path.isfile(latest_path):
-        cannot_resume = f"cannot resume from {latest_path}"
+        cannot = f"cannot resume from {latest_path}"
         try:
             state = torch.load(latest_path, map_location="cpu", weights_only=True)
             trained_on = state["env_id"]
         except Exception as error:
-            name = type(error).__name__
-            raise UsageError(f"{cannot_resume} ({name}): delete it or drop --resume")
+            raise UsageError(f"{cannot} ({type(error).__name__}): delete it or drop --resume")
         other = f"{latest_path} was trained on {trained_on}, not {args.env}"
         require(trained_on == args.env, f"{other}: use another --output-dir")
-        # Another rate is another task (other dynamics per action, other horizon): continuing
-        # would mix them. Checkpoints without the record were trained at the env's own rate.
+        # Another rate is another task (other dynamics, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)
         rate = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
         fix = f"pass --frame-skip {trained_at} or use another --output-dir"
@@ -566,16 +523,12 @@ def train(args: Args):
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
-            name = type(error).__name__
-            raise UsageError(f"{cannot_resume} ({name}): delete it or drop --resume")
-        # state["args"] is a record only, never read back: old checkpoints resume, and the flags
-        # given now rule.
-        obs_rms.mean = state["obs_mean"].numpy()
-        obs_rms.var = state["obs_var"].numpy()
-        obs_rms.count = state["obs_count"]
-        ret_rms.mean = state["ret_mean"].numpy()
-        ret_rms.var = state["ret_var"].numpy()
-        ret_rms.count = state["ret_count"]
+            raise UsageError(f"{cannot} ({type(error).__name__}): delete it or drop --resume")
+        # state["args"] is a record only, never read back: the flags given now rule.
+        for rms, name in ((obs_rms, "obs"), (ret_rms, "ret")):
+            rms.mean = state[f"{name}_mean"].numpy()
+            rms.var = state[f"{name}_var"].numpy()
+            rms.count = state[f"{name}_count"]
         global_step = state["global_step"]
         best_return = state["best_return"]
         print(f"resumed from {latest_path} at step {global_step}")
@@ -585,12 +538,11 @@ def train(args: Args):
     def to_tensor(x):
         return torch.as_tensor(np.asarray(x), dtype=torch.float64)
 
+    # A checkpoint is a plain dict of tensors and numbers (experts/README.md).
     def checkpoint(eval_return=None):
-        # A plain dict of tensors and numbers (experts/README.md).
         return {
             "format": "copycat-suite/expert-ppo/1",
             "env_id": args.env,
-            # The rate it was trained at (None was resolved above to the env's own).
             "frame_skip": args.frame_skip,
             "obs_shape": list(envs.single_observation_space.shape),
             "action_shape": list(envs.single_action_space.shape),
@@ -603,7 +555,6 @@ def train(args: Args):
             "args": asdict(args),
             "global_step": global_step,
             "eval_return": eval_return,
-            # Where it was trained (checkpoints made before this have none).
             "machine": machine(),
             # Only needed to resume training:
             "agent": agent.state_dict(),
@@ -615,11 +566,7 @@ def train(args: Args):
             "best_return": best_return,
         }
 
-    def frozen_policy():
-        return ExpertPolicy(checkpoint())
-
     def normalized(raw: np.ndarray) -> torch.Tensor:
-        # The observations as the networks read them.
         return torch.as_tensor(obs_rms.normalize(raw), dtype=torch.float32)
 
     batch_size = args.num_envs * args.num_steps
@@ -657,7 +604,6 @@ def train(args: Args):
                 raw_obs, reward, terminated, truncated, info = envs.step(clipped_action)
                 global_step += args.num_envs
                 episode_return += reward
-
                 # Scale rewards by the std of the discounted return.
                 discounted_return = discounted_return * args.gamma + reward
                 ret_rms.update(discounted_return)
@@ -674,8 +620,7 @@ def train(args: Args):
                 for i in np.flatnonzero(done):
                     recent_returns.append(episode_return[i])
                     recent_returns = recent_returns[-20:]
-                    episode_return[i] = 0.0
-                    discounted_return[i] = 0.0
+                    episode_return[i], discounted_return[i] = 0.0, 0.0
 
                 obs_buf[step] = obs
                 act_buf[step] = action
@@ -706,7 +651,6 @@ def train(args: Args):
             for idx in torch.randperm(batch_size).split(minibatch_size):
                 _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
                 ratio = (new_logp - b_logp[idx]).exp()
-                # Advantages normalised per minibatch.
                 adv = (b_adv[idx] - b_adv[idx].mean()) / (b_adv[idx].std() + 1e-8)
                 clipped_ratio = ratio.clamp(1 - args.clip_coef, 1 + args.clip_coef)
                 policy_loss = torch.max(-adv * ratio, -adv * clipped_ratio).mean()
@@ -720,20 +664,16 @@ def train(args: Args):
         # ---- Progress, evaluation, checkpoints
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
-        recent = "n/a"
-        if recent_returns:
-            recent = f"{np.mean(recent_returns):.0f}"
+        recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
         eta_min = (args.total_timesteps - global_step) / max(sps, 1e-6) / 60
         line = f"step {global_step:>9} | {sps:5.0f} steps/s | recent return {recent:>6}"
         print(f"{line} | value loss {value_loss.item():.3f} | ETA {eta_min:.1f} min", flush=True)
         if global_step >= next_eval:
             next_eval += args.eval_every_steps
-            policy = frozen_policy()
+            policy = ExpertPolicy(checkpoint())
             seed = args.seed + global_step
-            eval_returns = evaluate(
-                policy, args.env, args.train_eval_episodes, seed, args.frame_skip
-            )
-            eval_return = float(np.mean(eval_returns))
+            scores = evaluate(policy, args.env, args.train_eval_episodes, seed, args.frame_skip)
+            eval_return = float(np.mean(scores))
             best = max(best_return, eval_return)
             print(f"eval at step {global_step}: {eval_return:.1f} (best {best:.1f})", flush=True)
             if eval_return > best_return:
@@ -753,16 +693,14 @@ def train(args: Args):
         stopped = f"stopped after {args.max_minutes} min at step {global_step}"
         print(f"{stopped}: continue with the same command and --resume")
         return
-    policy = frozen_policy()
-    returns = evaluate(
-        policy, args.env, args.eval_episodes, seed=10_000, frame_skip=args.frame_skip
-    )
+    # The final evaluation: seeds 10000, 10001, ..., as --eval-only.
+    policy = ExpertPolicy(checkpoint())
+    returns = evaluate(policy, args.env, args.eval_episodes, 10_000, args.frame_skip)
     mean = float(np.mean(returns))
     std = float(np.std(returns))
     save_atomically(checkpoint(mean), latest_path)
-    print(
-        f"wrote {latest_path} (last) and {best_path} (best periodic evaluation, {best_return:.1f})"
-    )
+    best = f"best periodic evaluation, {best_return:.1f}"
+    print(f"wrote {latest_path} (last) and {best_path} ({best})")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 

@@ -6,7 +6,7 @@
 average_ensemble.py averages a BC-SO and a BC-OH member, and beats each of them on Hopper. Whether that gain comes
 from the two views of the history (the current frame against the whole history) or from averaging two networks at
 all is what this control asks. It is average_ensemble.py itself (its flags, training, evaluation of the ensemble and
-of each member, seed loop, resume and output) with the members swapped: the first is initialised from the seed
+of each member, seed loop and output) with the members swapped: the first is initialised from the seed
 exactly as average_ensemble.py initialises its member of that kind, so it trains to the same numbers; its twin, of
 the same kind, from the seed + TWIN_SEED_OFFSET. Both see the same minibatches, as average_ensemble.py's members do.
 Each result gains where it was made (`machine`, benchmark/machine.py), as the grid runner adds it.
@@ -14,6 +14,7 @@ Each result gains where it was made (`machine`, benchmark/machine.py), as the gr
 import json
 import signal
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -34,6 +35,8 @@ KINDS = {"bc_so": average_ensemble.CurrentFramePolicy, "bc_oh": average_ensemble
 
 @dataclass
 class Args(average_ensemble.Args):
+    exp_name: str = "ensemble_twins"
+    """the name of this experiment, part of the default output folder"""
     member: Literal["bc_so", "bc_oh"] = "bc_so"
     """the kind of both members: two BC-SO (the current frame) or two BC-OH (the history)"""
 
@@ -66,17 +69,18 @@ if __name__ in ("__main__", "__mp_main__"):  # the pool's workers (spawned) impo
 def main(argv=None) -> int:
     args = tyro.cli(Args, args=argv)
     use_twins()
-    output_dir = args.output_dir.format(run_name=average_ensemble.run_name(args), env=args.env)  # as run() names it
+    if args.output_dir is None:  # named here as run() names it, to find the results afterwards
+        args.output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
     signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill PID` stops the job as Ctrl-C does
     try:
         average_ensemble.run(args)
     except average_ensemble.UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    for seed in args.seeds:  # where each seed was made (a kept seed keeps its record)
-        path = Path(output_dir, f"result_seeds{seed}.json")
+    for seed in args.seeds:  # where each seed was made
+        path = Path(args.output_dir, f"result_seeds{seed}.json")
         result = json.loads(path.read_text())
-        write_text(path, json.dumps({**result, "machine": result.get("machine") or machine()}, indent=1))
+        write_text(path, json.dumps({**result, "machine": machine()}, indent=1))
     return 0
 
 

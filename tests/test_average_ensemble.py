@@ -56,15 +56,17 @@ def test_members_train_exactly_as_bc_so_and_bc_oh(monkeypatch):
     demos = fake_demos()
     for module in (average_ensemble, bc_so, bc_oh):
         skip_evaluation(monkeypatch, module)
-    ensemble = average_ensemble.train_seed(tiny_args(average_ensemble), demos, 1, torch.device("cpu"))
+    trained = average_ensemble.train_seed(tiny_args(average_ensemble), demos, 1, torch.device("cpu"))
+    evaluations, member_evaluations, ensemble, _ = trained
     for name, module in (("bc_so", bc_so), ("bc_oh", bc_oh)):
-        alone = module.train_seed(tiny_args(module), demos, 1, torch.device("cpu"))["policy"].state_dict()
-        member = ensemble["policy"].members[name].state_dict()
+        _, policy, _ = module.train_seed(tiny_args(module), demos, 1, torch.device("cpu"))
+        alone = policy.state_dict()
+        member = ensemble.members[name].state_dict()
         assert member.keys() == alone.keys()
         assert all(torch.equal(member[key], alone[key]) for key in alone), name
-    evaluated_epochs = [epoch for epoch, _ in ensemble["evaluations"]]
+    evaluated_epochs = [epoch for epoch, _ in evaluations]
     assert evaluated_epochs == [1, 2]
-    assert {name: [epoch for epoch, _ in evals] for name, evals in ensemble["member_evaluations"].items()} == {
+    assert {name: [epoch for epoch, _ in evals] for name, evals in member_evaluations.items()} == {
         "bc_so": evaluated_epochs, "bc_oh": evaluated_epochs}
 
 

@@ -35,7 +35,7 @@ def test_a_bad_command_line_exits_2_naming_the_flag(script, case):
     (["--seeds", "1", "two"], "--seeds"),
 ])
 def test_a_bad_flag_value_names_the_flag(args, message):
-    assert_tyro_error(run_in_process("c2f.py", *args), message)
+    assert_tyro_error(run_in_process("c2f_table3.py", *args), message)
 
 
 @pytest.mark.parametrize("script", ["c2f.py", "expert_ppo.py"])
@@ -43,3 +43,26 @@ def test_help_still_prints_and_exits_0(script):
     result = run_in_process(script, "--help")
     assert result.returncode == 0 and result.stderr == ""
     assert "--env STR" in result.stdout
+
+
+METHOD_FILES = ["bc_oh.py", "bc_so.py", "c2f.py", "c2f_table3.py", "fca.py", "keyframe.py", "history_dropout.py",
+                "average_ensemble.py", "dagger.py"]
+
+
+@pytest.mark.parametrize("script", METHOD_FILES)
+def test_help_opens_with_a_line_saying_what_the_script_does(script):
+    """tyro prints the Args docstring under the usage line: the paper's name of the method and where it is."""
+    lines = [line for line in run_in_process(script, "--help").stdout.splitlines() if line.strip()]
+    assert lines[0].startswith("usage: ") and script in lines[0]
+    assert "paper" in lines[1] and not lines[1].startswith(("╭", "+")), lines[1]
+
+
+@pytest.mark.parametrize("script", METHOD_FILES)
+def test_an_env_id_without_a_version_is_refused_before_anything_else(script, tmp_path, monkeypatch):
+    """gymnasium would make Hopper-v5 of "Hopper", and the demo file of it would not be found: refused first."""
+    from conftest import assert_usage_error
+
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process(script, "--env", "Hopper")
+    assert_usage_error(result, "env 'Hopper' has no version: use Hopper-v4 (the paper's) or Hopper-v5")
+    assert result.returncode == 2
