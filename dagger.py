@@ -1,7 +1,7 @@
 # DAgger with an expert queried online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README
-"""DAgger: BC-OH on the demonstrations (round 0), then rounds of DAgger (Ross et al. 2011). Each
-round rolls out a beta-mix of the expert and the learner, labels every state it visits with the
-expert's action, adds those states to the training data, and trains on.
+"""DAgger (Ross et al. 2011, section 3): BC-OH on the demonstrations (round 0), then rounds that
+roll out a beta-mix of the expert and the learner, label every visited state with the expert's
+action, add those states to the training data, and train on.
 
 The learner sees the noisy observations and their history, as in bc_oh.py; the expert labels each
 state from the clean observation. The labels, 8000 in all ("DAgger 8K"), are split over the rounds.
@@ -166,7 +166,7 @@ def collect_round(policy, expert, args, num_labels: int, beta: float, rng, devic
             frames = np.repeat(observed, args.history, axis=0)
         else:
             frames = np.concatenate([frames[1:], observed])
-        # The expert labels the state from the clean observation (NOTES.md section 3).
+        # The expert labels the state from the clean observation: it sees what the sensor hides.
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
         # The beta-mix: the expert acts with probability beta, the learner otherwise.
         expert_acts = rng.random() < beta
@@ -219,8 +219,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     rounds = []
 
     def aggregate(round_number):
-        """Roll out the beta-mix, label its states and add them to the data: the new data's size."""
-        # train_step samples the aggregate from now on.
+        # Roll out the beta-mix, label its states, and add them to the data train_step samples.
         nonlocal inputs, targets
         beta = dagger_beta(round_number, beta_rounds)
         num_labels = budget[round_number - 1]
@@ -244,7 +243,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, aggregate):
     """The training loop: random minibatches, a linearly decaying learning rate, evaluations."""
-    # Round 0 trains --epochs epochs on the demos, each round after --dagger-epochs on the aggregate.
+    # Round 0: --epochs epochs on the demos; each later round: --dagger-epochs on the aggregate.
     epochs = args.epochs + args.dagger_rounds * args.dagger_epochs
     steps_per_epoch = num_samples // args.batch_size
     total_steps = args.epochs * steps_per_epoch
@@ -279,7 +278,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
         evaluating = epoch % args.eval_every == 0 or epoch == round_end
         if evaluating:
             policy.eval()
-            # The final learner is evaluated 3 times, on other episodes each: its score.
+            # The final learner is evaluated 3 times, on other episodes: its score is their mean.
             repeats = 3 if epoch == epochs else 1
             for repeat in range(repeats):
                 episodes_seed = 10_000 * seed + epoch + repeat * args.eval_episodes
@@ -331,7 +330,8 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        raise UsageError(f"env {env_id!r} has no version: use {env_id}-v4 (the paper's) or -v5")
+        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
     except Exception as error:
@@ -675,7 +675,6 @@ def run(args):
 
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)
-    # Round 0's score is what bc_oh.py gets on the same seed.
     print(f"\n{'seed':>6} | {'score':>8} | {'round 0 (bc_oh)':>15}")
     for seed, entry in per_seed.items():
         print(f"{seed:>6} | {entry['score']:8.1f} | {entry['bc_oh_score']:15.1f}")

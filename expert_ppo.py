@@ -228,7 +228,6 @@ class ExpertPolicy(nn.Module):
         # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
         obs = obs[..., : len(self.obs_mean)]
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
-        # The actor's mean action, clipped to the action bounds.
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
 
@@ -251,11 +250,10 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 # ---- Checkpoints ----
 def machine() -> dict:
     """Where a result was made: the same command, kind of CPU and versions give the same digits."""
-    cpus = ""
+    cpu = None
     if os.path.isfile("/proc/cpuinfo"):
         with open("/proc/cpuinfo") as file:
-            cpus = file.read()
-    cpu = re.search(r"^model name\s*: (.*)$", cpus, re.M)
+            cpu = re.search(r"^model name\s*: (.*)$", file.read(), re.M)
     return {
         "cpu": cpu[1] if cpu else platform.processor(),
         "cpu_capability": torch.backends.cpu.get_cpu_capability(),
@@ -282,7 +280,6 @@ def write_atomically(path: str, write):
 
 
 def save_atomically(obj, path: str):
-    """torch.save through write_atomically: never half a checkpoint."""
     write_atomically(path, lambda file: torch.save(obj, file))
 
 
@@ -313,9 +310,8 @@ def checkpoint_env(path: str) -> str | None:
 
 
 def retargeted_expert(path: str, env_id: str):
-    """--retarget: the expert at path and the env it was made for. Refused unless that is another
-    version of env_id (Hopper-v4 for Hopper-v5) with the same action shape and observation, or one
-    that is its leading positions and velocities (Ant-v4's 27 entries of Ant-v5's 105)."""
+    """--retarget: the expert at path, made for another version of env_id (Hopper-v4 for Hopper-v5)
+    with the same shapes, or whose observation is env_id's leading positions and velocities."""
     made_for = checkpoint_env(path) or env_id
     policy = load_expert(path, made_for)
     env = make_env(env_id)
@@ -342,7 +338,6 @@ def eval_only(args: Args):
     other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
     fix = f"on {args.env} (and --ship-to to ship it there), or a checkpoint made for {args.env}"
     require(args.retarget or recorded == args.env or not same_family, f"{other} {fix}")
-    # load_expert checks that the file is a readable checkpoint made for --env (or its family).
     if args.retarget:
         policy, made_for = retargeted_expert(path, args.env)
     else:
@@ -362,8 +357,7 @@ def eval_only(args: Args):
     returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
     for i, episode_return in enumerate(returns):
         print(f"episode {i}: return {episode_return:.1f}")
-    mean = float(np.mean(returns))
-    std = float(np.std(returns))
+    mean, std = float(np.mean(returns)), float(np.std(returns))
     if args.ship_to:
         # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
         checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
@@ -376,8 +370,7 @@ def eval_only(args: Args):
 
 # ---- Demonstrations (--make-demos): the input of the imitation files ----
 def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert on the clean env. Besides o_t, a_t and the episode starts,
-    it keeps what Minari needs: rewards, terminations, truncations, final observations."""
+    """Roll out the deterministic expert: o_t, a_t, episode starts, and what Minari needs too."""
     env = make_env(env_id, frame_skip)
     steps = []
     final_observations = []

@@ -325,7 +325,8 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        raise UsageError(f"env {env_id!r} has no version: use {env_id}-v4 (the paper's) or -v5")
+        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
     except Exception as error:

@@ -27,9 +27,10 @@ from benchmark.results import OneLineParser, UsageError, run_cli  # noqa: E402
 CHECKPOINT_KEYS = ("method", "env_id", "args", "obs_dim", "act_dim", "state_dict")
 """what every method file's --save-model writes"""
 SAVE_FIX = "pass a seed<S>.pt that a method file wrote with --save-model"
-RETIRED = ("expert", "cuda_graph")
+RETIRED = ("expert", "cuda_graph", "velocity_dims")
 """settings the method files dropped that change neither the policy nor its evaluation (--expert: which expert made the
-demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on the GPU): an older checkpoint's are ignored"""
+demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on the GPU; --velocity-dims: None, the built-in
+layout, unless set, which saved_args refuses): an older checkpoint's are ignored"""
 
 
 def read_checkpoint(path) -> dict:
@@ -67,6 +68,9 @@ def method_module(method: str, path):
 def saved_args(module, checkpoint: dict, path):
     """The method file's Args with the checkpoint's values (settings the file added since keep their defaults, RETIRED
     ones it no longer has are dropped)."""
+    if checkpoint["args"].get("velocity_dims"):
+        raise UsageError(f"{path} was trained with --velocity-dims, which the method files no longer have: "
+                         "evaluate it with the version of its method file that saved it")
     known = {field.name for field in fields(module.Args)}
     unknown = sorted(set(checkpoint["args"]) - known - set(RETIRED))
     if unknown:

@@ -70,7 +70,7 @@ class Panel:
         self.module, self.policy, self.args = loaded
         m, args = self.module, self.args
         env = m.make_env(args.env, args.frame_skip)
-        self.env = m.PartialObservation(env, m.velocity_dims(env, args.env, args.velocity_dims), args.obs_noise_std, args.hide_velocities, seed)
+        self.env = m.PartialObservation(env, m.velocity_dims(env, args.env), args.obs_noise_std, args.hide_velocities, seed)
         self.low, self.high, self.dt = env.action_space.low, env.action_space.high, env.unwrapped.dt
         obs, _ = self.env.reset(seed=seed)  # as evaluate's vector env resets its first env
         self.frames = np.repeat(obs[None], args.history, axis=0)  # [o_{t-H+1}, ..., o_t], the first frame repeated

@@ -1,6 +1,6 @@
-"""c2f.py: the coarse-to-fine model, its stop-gradient, two-stage training and every Table 3 ablation flag;
-bc_so.py's policy (o_t only); the same seed twice gives the same training on CPU."""
-import argparse
+"""c2f.py: the paper's coarse-to-fine model, its stop-gradient and Eq. 2; c2f_table3.py: every Table 3 ablation
+flag, two-stage training and the capacity control, and at its defaults exactly c2f.py; bc_so.py's policy (o_t
+only); the same seed twice gives the same training on CPU."""
 import copy
 import re
 
@@ -10,18 +10,24 @@ import torch
 import bc_oh
 import bc_so
 import c2f
+import c2f_table3
 from conftest import fake_demos, skip_evaluation, tiny_args
 
 OBS, ACT, H, HIDDEN = 11, 3, 3, 16
-DEFAULTS = c2f.PAPER_FLAGS
+
+
+def paper_model(seed=0):
+    """The model c2f.py builds."""
+    torch.manual_seed(seed)
+    inputs = torch.randn(64, H * OBS) * 3 + 1
+    return c2f.make_policy(c2f.Args(history=H, hidden=HIDDEN), OBS, ACT, inputs)
 
 
 def model(seed=0, **flags):
-    """The model c2f.py builds for these flags: the paper's Policy at the defaults, else Table3Policy."""
+    """The model c2f_table3.py builds for these flags (the same random inputs as paper_model)."""
     torch.manual_seed(seed)
     inputs = torch.randn(64, H * OBS) * 3 + 1
-    args = argparse.Namespace(history=H, hidden=HIDDEN, **{**DEFAULTS, **flags})
-    return c2f.make_policy(args, OBS, ACT, inputs)
+    return c2f_table3.make_policy(c2f_table3.Args(history=H, hidden=HIDDEN, **flags), OBS, ACT, inputs)
 
 
 def batch(seed=1):
@@ -33,15 +39,151 @@ def shapes(policy):
 
 
 def capture_inputs(policy, layers, obs_history):
-    """Run the model; return (zeta, feature, final, {layer name: its input})."""
+    """Run the model; return (zeta, coarse feature, final, {layer name: its input})."""
     seen, hooks = {}, []
     for name in layers:
-        hooks.append(policy.get_submodule(name).register_forward_hook(lambda m, args, out, name=name: seen.__setitem__(name, args[0])))
+        def hook(module, args, output, name=name):
+            seen[name] = args[0]
+        hooks.append(policy.get_submodule(name).register_forward_hook(hook))
     zeta, feature = policy.coarse_model(obs_history)
     final = policy(obs_history)
-    for hook in hooks:
-        hook.remove()
+    for handle in hooks:
+        handle.remove()
     return zeta, feature, final, seen
+
+
+# ----------------------------------------------------------------------------------------------
+# c2f.py: the paper's model
+
+
+def test_paper_model_dimensions():
+    policy = paper_model()
+    assert type(policy) is c2f.Policy
+    assert [layer.in_features for layer in policy.coarse if isinstance(layer, torch.nn.Linear)] == [OBS, HIDDEN, HIDDEN]
+    assert policy.coarse[-1].out_features == ACT, "zeta is an action"
+    assert [policy.policy_first[0].in_features, policy.policy_rest[0].in_features, policy.policy_rest[2].out_features] == [H * OBS, HIDDEN, HIDDEN]
+    assert (policy.head.in_features, policy.head.out_features) == (HIDDEN + ACT, ACT)
+
+
+def test_the_paper_model_reads_zeta_from_o_t_and_joins_it_before_the_head():
+    policy = paper_model()
+    obs_history, _ = batch()
+    zeta, final = policy.coarse_and_final(obs_history)
+    assert torch.equal(zeta, policy.coarse(policy.normalize(obs_history)[:, -OBS:])), "zeta = pi_phi(o_t)"
+    assert torch.equal(final, policy(obs_history))
+    feature = policy.policy_rest(policy.policy_first(policy.normalize(obs_history)))
+    assert torch.equal(final, policy.head(torch.cat([feature, zeta], dim=1)))
+    changed = obs_history.clone()
+    changed[:, :-OBS] += 5.0
+    assert torch.equal(policy.coarse_and_final(changed)[0], zeta), "the coarse model sees o_t only"
+    assert not torch.allclose(policy(changed), final), "the policy model sees the history"
+
+
+def test_the_stop_gradient_keeps_the_final_loss_off_the_coarse_model():
+    policy = paper_model()
+    obs_history, target = batch()
+    _, final = policy.coarse_and_final(obs_history)
+    ((final - target) ** 2).mean().backward()
+    assert all(p.grad is None or not p.grad.any() for p in policy.coarse.parameters())
+    assert policy.policy_first[0].weight.grad.abs().sum() > 0 and policy.head.weight.grad.abs().sum() > 0
+
+
+def train(module, monkeypatch, capsys, seed=1, demos=None, **overrides):
+    """train_seed on fake demos without env rollouts; returns (state_dict, printed loss lines)."""
+    skip_evaluation(monkeypatch, module)
+    demos = fake_demos() if demos is None else demos
+    _, policy, _ = module.train_seed(tiny_args(module, hidden=HIDDEN, **overrides), demos, seed, torch.device("cpu"))
+    lines = [line for line in capsys.readouterr().out.splitlines() if "loss" in line]
+    return {k: v.clone() for k, v in policy.state_dict().items()}, lines
+
+
+def record_outputs(monkeypatch, policy_class) -> list:
+    """Patch policy_class.coarse_and_final to record every (zeta, final) it returns."""
+    outputs = []
+    original = policy_class.coarse_and_final
+
+    def recording(self, obs_history):
+        outputs.append(original(self, obs_history))
+        return outputs[-1]
+
+    monkeypatch.setattr(policy_class, "coarse_and_final", recording)
+    return outputs
+
+
+def test_joint_training_minimises_both_losses(monkeypatch, capsys):
+    """The printed loss is MSE(zeta) + MSE(final) of the last batch (Eq. 2); constant actions make the targets known."""
+    outputs = record_outputs(monkeypatch, c2f.Policy)
+    demos = fake_demos()
+    demos["actions"][:] = [0.5, -0.25, 0.1]
+    _, lines = train(c2f, monkeypatch, capsys, demos=demos, epochs=1)
+    zeta, final = outputs[-1]
+    target = torch.tensor([0.5, -0.25, 0.1])
+    expected = ((zeta - target) ** 2).mean() + ((final - target) ** 2).mean()
+    assert f"loss {expected.item():.5f} " in lines[-1]
+
+
+def test_c2f_has_no_ablation_flag():
+    fields = set(c2f.Args.__dataclass_fields__)
+    assert not fields & {"fusion", "coarse_output", "coarse_input", "policy_input", "stop_gradient", "coarse_action", "two_stage"}
+    assert set(c2f_table3.Args.__dataclass_fields__) - fields == set(TABLE3_DEFAULTS)
+
+
+def without_timing(lines):
+    """Progress lines without their wall-clock parts (ms/step, minutes left), which differ between identical runs."""
+    return [re.sub(r" \| [0-9.]+ ms/step| \| [0-9.]+ min left", "", line) for line in lines]
+
+
+@pytest.mark.parametrize("module", [bc_so, bc_oh, c2f, c2f_table3], ids=lambda module: module.METHOD)
+def test_same_seed_gives_the_same_training(module, monkeypatch, capsys):
+    first, first_lines = train(module, monkeypatch, capsys)
+    second, second_lines = train(module, monkeypatch, capsys)
+    other, other_lines = train(module, monkeypatch, capsys, seed=2)
+    first_lines, second_lines, other_lines = (without_timing(lines) for lines in (first_lines, second_lines, other_lines))
+    assert first_lines == second_lines and len(first_lines) == 2
+    assert all(torch.equal(first[name], second[name]) for name in first)
+    assert first_lines != other_lines
+
+
+# ----------------------------------------------------------------------------------------------
+# c2f_table3.py at its defaults is c2f.py
+
+
+TABLE3_DEFAULTS = {"fusion": "late", "coarse_output": "action", "coarse_input": "current", "policy_input": "history",
+                   "stop_gradient": True, "coarse_action": True, "two_stage": False}
+
+
+def test_table3_defaults_are_the_papers():
+    args = c2f_table3.Args()
+    assert {name: getattr(args, name) for name in TABLE3_DEFAULTS} == TABLE3_DEFAULTS
+
+
+def test_the_paper_model_is_table3s_model_at_its_defaults():
+    """c2f_table3.py's Policy at its defaults builds c2f.py's layers in the same order (the same seed gives the
+    same initial weights) and gives exactly the same outputs and gradients."""
+    policy, general = paper_model(), model()
+    obs_history, target = batch()
+    assert type(general) is c2f_table3.Policy
+    assert list(policy.state_dict()) == list(general.state_dict())
+    assert all(torch.equal(a, b) for a, b in zip(policy.state_dict().values(), general.state_dict().values()))
+    assert all(torch.equal(a, b) for a, b in zip(policy.coarse_and_final(obs_history), general.coarse_and_final(obs_history)))
+    gradients = []
+    for net in (policy, general):
+        zeta, final = net.coarse_and_final(obs_history)
+        (((final - target) ** 2).mean() + ((zeta - target) ** 2).mean()).backward()
+        gradients.append([p.grad.clone() for p in net.parameters()])
+    assert all(torch.equal(a, b) for a, b in zip(*gradients))
+
+
+def test_table3_trains_as_c2f_at_its_defaults(monkeypatch, capsys):
+    """The same seed and demos: the same printed losses and the same trained weights, bit for bit."""
+    paper, paper_lines = train(c2f, monkeypatch, capsys)
+    general, general_lines = train(c2f_table3, monkeypatch, capsys)
+    assert without_timing(paper_lines) == without_timing(general_lines)
+    assert list(paper) == list(general) and all(torch.equal(paper[name], general[name]) for name in paper)
+
+
+# ----------------------------------------------------------------------------------------------
+# c2f_table3.py: the ablations of Table 3
 
 
 FUSION_LAYERS = {"early": "policy_first.0", "middle": "policy_rest.0", "late": "head"}
@@ -119,12 +261,13 @@ def test_each_ablation_changes_only_the_layers_it_names(flags, changed):
     assert {name for name in default if default[name] != ablated[name]} == changed
 
 
-def test_paper_model_dimensions():
-    policy = model()
-    assert [layer.in_features for layer in policy.coarse if isinstance(layer, torch.nn.Linear)] == [OBS, HIDDEN, HIDDEN]
-    assert policy.coarse[-1].out_features == ACT, "zeta is an action"
-    assert [policy.policy_first[0].in_features, policy.policy_rest[0].in_features, policy.policy_rest[2].out_features] == [H * OBS, HIDDEN, HIDDEN]
-    assert (policy.head.in_features, policy.head.out_features) == (HIDDEN + ACT, ACT)
+def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():
+    policy = model(fusion="output")
+    obs_history, _ = batch()
+    zeta, _, _, seen = capture_inputs(policy, ["head"], obs_history)
+    assert [type(layer) for layer in policy.policy_rest] == [torch.nn.Linear, torch.nn.ReLU, torch.nn.Linear], "no last ReLU"
+    assert policy.policy_rest[-1].out_features == ACT and policy.head.in_features == 2 * ACT
+    assert torch.equal(seen["head"][:, -ACT:], zeta)
 
 
 @pytest.mark.parametrize("stop_gradient", [True, False])
@@ -144,18 +287,9 @@ def test_stop_gradient_keeps_the_final_loss_off_the_coarse_model(stop_gradient):
     assert torch.allclose(other.head.weight.grad, policy.head.weight.grad)
 
 
-def train(module, monkeypatch, capsys, seed=1, demos=None, **overrides):
-    """train_seed on fake demos without env rollouts; returns (state_dict, printed loss lines)."""
-    skip_evaluation(monkeypatch, module)
-    demos = fake_demos() if demos is None else demos
-    result = module.train_seed(tiny_args(module, hidden=HIDDEN, **overrides), demos, seed, torch.device("cpu"))
-    lines = [line for line in capsys.readouterr().out.splitlines() if "loss" in line]
-    return {k: v.clone() for k, v in result["policy"].state_dict().items()}, lines
-
-
 def record_stages(monkeypatch) -> list:
-    """Patch c2f.fit to record (evaluate_policy, weights before, weights after) of every call."""
-    calls, original = [], c2f.fit
+    """Patch c2f_table3.fit to record (evaluate_policy, weights before, weights after) of every call."""
+    calls, original = [], c2f_table3.fit
 
     def recording_fit(args, policy, *rest, **kwargs):
         before = copy.deepcopy(policy.state_dict())
@@ -163,14 +297,14 @@ def record_stages(monkeypatch) -> list:
         calls.append((kwargs.get("evaluate_policy", True), before, copy.deepcopy(policy.state_dict())))
         return output
 
-    monkeypatch.setattr(c2f, "fit", recording_fit)
+    monkeypatch.setattr(c2f_table3, "fit", recording_fit)
     return calls
 
 
 def test_two_stage_trains_the_coarse_model_first_then_leaves_it_unchanged(monkeypatch, capsys):
     """Stage 1 and stage 2 are two runs of the one training loop, fit: the first trains only the coarse model."""
     calls = record_stages(monkeypatch)
-    final, lines = train(c2f, monkeypatch, capsys, two_stage=True, stop_gradient=False)  # no sg: only freezing protects it
+    final, lines = train(c2f_table3, monkeypatch, capsys, two_stage=True, stop_gradient=False)  # no sg: only freezing protects it
     assert [evaluates for evaluates, _, _ in calls] == [False, True], "stage 1 does not evaluate, stage 2 does"
     (_, initial, after_one), (_, _, after_two) = calls
     coarse = [name for name in final if name.startswith("coarse.")]
@@ -187,7 +321,7 @@ def test_two_stage_trains_the_coarse_model_first_then_leaves_it_unchanged(monkey
 def test_two_stage_coarse_model_is_bc_so(monkeypatch, capsys):
     """Stage 1 trains exactly a BC-SO policy: same init, data, batches and lr schedule give the same weights."""
     calls = record_stages(monkeypatch)
-    train(c2f, monkeypatch, capsys, two_stage=True)
+    train(c2f_table3, monkeypatch, capsys, two_stage=True)
     bc_so_weights, _ = train(bc_so, monkeypatch, capsys)
     after_stage_one = calls[0][2]
     for name, value in after_stage_one.items():
@@ -195,82 +329,13 @@ def test_two_stage_coarse_model_is_bc_so(monkeypatch, capsys):
             assert torch.allclose(bc_so_weights[f"net.{name.removeprefix('coarse.')}"], value, atol=1e-6), name
 
 
-def test_joint_training_minimises_both_losses(monkeypatch, capsys):
-    """The printed loss is MSE(zeta) + MSE(final) of the last batch (Eq. 2); constant actions make the targets known."""
-    outputs = []
-    original = c2f.Policy.coarse_and_final
-    monkeypatch.setattr(c2f.Policy, "coarse_and_final", lambda self, obs_history: outputs.append(original(self, obs_history)) or outputs[-1])
-    demos = fake_demos()
-    demos["actions"][:] = [0.5, -0.25, 0.1]
-    _, lines = train(c2f, monkeypatch, capsys, demos=demos, epochs=1)
-    zeta, final = outputs[-1]
-    target = torch.tensor([0.5, -0.25, 0.1])
-    expected = ((zeta - target) ** 2).mean() + ((final - target) ** 2).mean()
-    assert f"loss {expected.item():.5f} " in lines[-1]
-
-
-def without_timing(lines):
-    """Progress lines without their wall-clock parts (ms/step, ETA), which differ between identical runs."""
-    return [re.sub(r" \| [0-9.]+ ms/step| \| ETA [0-9.]+ min", "", line) for line in lines]
-
-
-@pytest.mark.parametrize("module", [bc_so, bc_oh, c2f], ids=lambda module: module.METHOD)
-def test_same_seed_gives_the_same_training(module, monkeypatch, capsys):
-    first, first_lines = train(module, monkeypatch, capsys)
-    second, second_lines = train(module, monkeypatch, capsys)
-    other, other_lines = train(module, monkeypatch, capsys, seed=2)
-    first_lines, second_lines, other_lines = (without_timing(lines) for lines in (first_lines, second_lines, other_lines))
-    assert first_lines == second_lines and len(first_lines) == 2
-    assert all(torch.equal(first[name], second[name]) for name in first)
-    assert first_lines != other_lines
+def test_two_stage_without_the_coarse_action_is_refused(monkeypatch, capsys):
+    with pytest.raises(c2f_table3.UsageError, match="--two-stage trains the coarse model first, --no-coarse-action never uses it"):
+        train(c2f_table3, monkeypatch, capsys, two_stage=True, coarse_action=False)
 
 
 # ----------------------------------------------------------------------------------------------
-# bc_so.py
-
-
-def test_bc_so_reads_only_the_current_frame():
-    torch.manual_seed(0)
-    inputs = torch.randn(64, H * OBS) * 3 + 1
-    policy = bc_so.Policy(OBS, ACT, H, HIDDEN, inputs)
-    assert policy.net[0].in_features == OBS
-    assert torch.equal(policy.normalize.mean, inputs[:, -OBS:].mean(0)), "normalised with statistics of o_t"
-    obs_history, _ = batch()
-    assert torch.equal(policy(obs_history), policy(older_frames_changed(obs_history)))
-    changed = obs_history.clone()
-    changed[:, -1] += 5.0
-    assert not torch.equal(policy(obs_history), policy(changed))
-
-
-def test_bc_so_result_does_not_depend_on_history(monkeypatch, capsys):
-    one, one_lines = train(bc_so, monkeypatch, capsys, history=1)
-    three, three_lines = train(bc_so, monkeypatch, capsys, history=3)
-    assert without_timing(one_lines) == without_timing(three_lines)
-    assert all(torch.equal(one[name], three[name]) for name in one)
-
-
-def test_the_paper_model_is_table3s_model_at_the_paper_flags():
-    """The default model reads as the paper's (plain lines); Table3Policy at the paper's flags builds the same
-    layers in the same order (the same seed gives the same initial weights) and gives exactly the same outputs
-    and gradients."""
-    policy, (obs_history, target) = model(), batch()
-    torch.manual_seed(0)
-    general = c2f.Table3Policy(OBS, ACT, torch.randn(64, H * OBS) * 3 + 1, argparse.Namespace(history=H, hidden=HIDDEN, **DEFAULTS))
-    assert type(policy) is c2f.Policy and all(type(model(**{name: value})) is c2f.Table3Policy for name, value in
-                                                [("fusion", "output"), ("coarse_input", "history"), ("stop_gradient", False), ("coarse_action", False)])
-    assert list(policy.state_dict()) == list(general.state_dict())
-    assert all(torch.equal(a, b) for a, b in zip(policy.state_dict().values(), general.state_dict().values()))
-    assert all(torch.equal(a, b) for a, b in zip(policy.coarse_and_final(obs_history), general.coarse_and_final(obs_history)))
-    gradients = []
-    for net in (policy, general):
-        zeta, final = net.coarse_and_final(obs_history)
-        (((final - target) ** 2).mean() + ((zeta - target) ** 2).mean()).backward()
-        gradients.append([p.grad.clone() for p in net.parameters()])
-    assert all(torch.equal(a, b) for a, b in zip(*gradients))
-
-
-# ----------------------------------------------------------------------------------------------
-# The capacity controls: --no-coarse-action and --fusion penultimate
+# c2f_table3.py: the capacity controls, --no-coarse-action and --fusion penultimate
 
 
 def count(module) -> int:
@@ -286,10 +351,15 @@ def test_the_controls_capacity_on_hopper():
     weights (README's and NOTES' figures: BC-OH 72,451, C2F 207,887 with a 138,252 history path)."""
     torch.manual_seed(0)
     inputs = torch.randn(64, 2 * 11)
-    build = lambda **flags: c2f.make_policy(argparse.Namespace(history=2, hidden=256, **{**DEFAULTS, **flags}), 11, 3, inputs)
+
+    def build(**flags):
+        return c2f_table3.make_policy(c2f_table3.Args(history=2, hidden=256, **flags), 11, 3, inputs)
+
     paper, control, penultimate = build(), build(coarse_action=False), build(fusion="penultimate")
     bc_oh_net = bc_oh.Policy(11, 3, 2, 256, inputs)
+    c2f_net = c2f.Policy(11, 3, 2, 256, inputs)
     assert (count(bc_oh_net), count(paper), history_path(paper)) == (72451, 207887, 138252)
+    assert count(c2f_net) == count(paper) and history_path(c2f_net) == history_path(paper)
     assert count(control) == count(paper) and history_path(control) == history_path(paper)
     assert count(penultimate) == count(bc_oh_net) + count(paper.coarse) + 3 * 3 == 142095
     assert history_path(penultimate) == count(bc_oh_net) + 3 * 3
@@ -325,20 +395,42 @@ def test_no_coarse_action_feeds_zeros_and_ignores_the_coarse_model():
 
 def test_no_coarse_action_trains_without_the_coarse_loss(monkeypatch, capsys):
     """The printed loss is MSE(final) alone; the coarse model keeps its initial weights."""
-    outputs = []
-    original = c2f.Table3Policy.coarse_and_final
-    monkeypatch.setattr(c2f.Table3Policy, "coarse_and_final", lambda self, obs_history: outputs.append(original(self, obs_history)) or outputs[-1])
-    built, make_policy = [], c2f.make_policy
-    monkeypatch.setattr(c2f, "make_policy", lambda *a: built.append(make_policy(*a)) or copy.deepcopy(built[-1]))
+    outputs = record_outputs(monkeypatch, c2f_table3.Policy)
+    built, make_policy = [], c2f_table3.make_policy
+
+    def recording_make_policy(*args):
+        built.append(make_policy(*args))
+        return copy.deepcopy(built[-1])
+
+    monkeypatch.setattr(c2f_table3, "make_policy", recording_make_policy)
     demos = fake_demos()
     demos["actions"][:] = [0.5, -0.25, 0.1]
-    final_weights, lines = train(c2f, monkeypatch, capsys, demos=demos, epochs=1, coarse_action=False)
+    final_weights, lines = train(c2f_table3, monkeypatch, capsys, demos=demos, epochs=1, coarse_action=False)
     expected = ((outputs[-1][1] - torch.tensor([0.5, -0.25, 0.1])) ** 2).mean()
     assert f"loss {expected.item():.5f} " in lines[-1]
     initial = built[0].state_dict()
     assert all(torch.equal(final_weights[name], initial[name]) == name.startswith(("coarse.", "normalize.")) for name in initial)
 
 
-def test_two_stage_without_the_coarse_action_is_refused(monkeypatch, capsys):
-    with pytest.raises(c2f.UsageError, match="--two-stage trains the coarse model first, --no-coarse-action never uses it"):
-        train(c2f, monkeypatch, capsys, two_stage=True, coarse_action=False)
+# ----------------------------------------------------------------------------------------------
+# bc_so.py
+
+
+def test_bc_so_reads_only_the_current_frame():
+    torch.manual_seed(0)
+    inputs = torch.randn(64, H * OBS) * 3 + 1
+    policy = bc_so.Policy(OBS, ACT, H, HIDDEN, inputs)
+    assert policy.net[0].in_features == OBS
+    assert torch.equal(policy.normalize.mean, inputs[:, -OBS:].mean(0)), "normalised with statistics of o_t"
+    obs_history, _ = batch()
+    assert torch.equal(policy(obs_history), policy(older_frames_changed(obs_history)))
+    changed = obs_history.clone()
+    changed[:, -1] += 5.0
+    assert not torch.equal(policy(obs_history), policy(changed))
+
+
+def test_bc_so_result_does_not_depend_on_history(monkeypatch, capsys):
+    one, one_lines = train(bc_so, monkeypatch, capsys, history=1)
+    three, three_lines = train(bc_so, monkeypatch, capsys, history=3)
+    assert without_timing(one_lines) == without_timing(three_lines)
+    assert all(torch.equal(one[name], three[name]) for name in one)

@@ -147,16 +147,16 @@ OWN_VERSIONS = {
     ("average_ensemble.py", "train_and_record"): "a seed's entry also scores each ensemble member, and its result sums them up",
     ("dagger.py", "fit"): "it trains one round: the rounds share one minibatch generator and one epoch count (the evaluation seeds)",
 }
-SHARED_BEFORE_THE_BANNER = {"evaluate", "fit"}
-"""bc_oh's training loop and evaluation sit above the plumbing banner (the method and evaluation sections), and
+SHARED_BEFORE_THE_BANNER = {"UsageError", "fit"}
+"""bc_oh's error type and training loop sit above its evaluation section (the method's section holds the loop), and
 every method file copies them too."""
 
 
 def shared_plumbing():
-    """{name: original module} of bc_oh.py's blocks after its "# ---- Shared plumbing" banner (plus evaluate and fit):
-    bc_oh for its own, the module it copies from for any it copies itself."""
+    """{name: original module} of bc_oh.py's blocks from its "# ---- Evaluation" banner on (evaluation, env, demos,
+    seeds and main), plus UsageError and fit: bc_oh for its own, the module it copies from for any it copies itself."""
     source = (REPO_ROOT / "bc_oh.py").read_text()
-    banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# ---- Shared plumbing"))
+    banner = next(number for number, line in enumerate(source.splitlines(), 1) if line.startswith("# ---- Evaluation"))
     names = {name for name, block in top_level_blocks(source).items() if block.start > banner} | SHARED_BEFORE_THE_BANNER
     copied_by_bc_oh = {name: copy.orig_module for copy in find_copies("bc_oh.py", source, []) for name in copy.names}
     return {name: copied_by_bc_oh.get(name, "bc_oh") for name in names}
@@ -166,10 +166,11 @@ def test_every_method_file_is_checked():
     """Every method file carries checked copies of all of bc_oh's shared plumbing, so that the checker covers
     it: a block rewritten by hand in one file (no marker, or a marker lost) fails here."""
     plumbing = shared_plumbing()
-    assert {"run", "make_env", "load_demos", "run_name", "require", "evaluate", "fit"} <= set(plumbing)
+    assert {"run", "make_env", "load_demos", "train_and_record", "evaluate", "fit"} <= set(plumbing)
     # the method files only load demos, and the harness records the machine: none of them carries these any more
     gone = {"load_or_generate_demos", "generate_demos", "demo_meta", "load_expert", "ExpertPolicy", "CudaGraphStep",
-            "make_adam", "set_learning_rate", "machine", "write_atomically"}
+            "make_adam", "set_learning_rate", "machine", "write_atomically", "run_name", "finished_seed",
+            "require"}
     assert not gone & set(plumbing), gone & set(plumbing)
     method_files = sorted(path.name for path in REPO_ROOT.glob("*.py") if re.search(r'^METHOD = "\w+"', path.read_text(), re.M))
     assert {"bc_oh.py", "bc_so.py", "c2f.py", "fca.py", "keyframe.py", "history_dropout.py", "average_ensemble.py", "dagger.py"} <= set(method_files)

@@ -1,4 +1,4 @@
-"""bc_so.py, bc_oh.py and c2f.py as commands: a tiny-budget run of each prints the per-seed table and the
+"""bc_so.py, bc_oh.py, c2f.py and c2f_table3.py as commands: a tiny-budget run of each prints the per-seed table and the
 summary line and writes the JSON result (and with --save-model a checkpoint that rebuilds the model), on the demos
 expert_ppo.py --make-demos made (conftest.link_experts links them); every bad input gives one line on stderr, exit
 status 2 and no traceback."""
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-import c2f
+import c2f_table3
 from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
 
 SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds?, (\d+)% of the expert's (\d+)$")
@@ -23,7 +23,8 @@ def workdir(tmp_path_factory):
 
 
 def smoke(script, workdir, *extra):
-    result = run_script(script, *SMOKE_ARGS, "--output-dir", "out/{method}", *extra, cwd=workdir)
+    method = script.removesuffix(".py")
+    result = run_script(script, *SMOKE_ARGS, "--output-dir", f"out/{method}", *extra, cwd=workdir)
     assert result.returncode == 0, result.stderr
     return result
 
@@ -53,7 +54,7 @@ def check_result(result, workdir, method, seeds):
     assert (match.group(2), match.group(3)) == (f"{summary['mean']:.1f}", f"{summary['std']:.1f}")
     with np.load(workdir / "demos" / "Hopper-v4_300.npz") as demos:
         expert = json.loads(str(demos["meta"]))["expert_return"]
-    assert (match.group(5), match.group(6)) == (f"{round(summary['mean'] / expert, 2):.0%}".removesuffix("%"), f"{expert:.0f}")
+    assert (match.group(5), match.group(6)) == (f"{summary['mean'] / expert:.0%}".removesuffix("%"), f"{expert:.0f}")
     return summary
 
 
@@ -61,10 +62,10 @@ def test_bc_oh_smoke_run_loads_the_made_demos_and_reports(tmp_path):
     workdir = link_experts(tmp_path)
     made = (workdir / "demos" / "Hopper-v4_300.npz").stat().st_mtime_ns
     result = smoke("bc_oh.py", workdir)
-    assert result.stdout.startswith("demos: 300 steps from demos/Hopper-v4_300.npz; copy error MSE(a_t-1, a_t)/Var(a) = ")
+    assert result.stdout.startswith("demos: 300 steps from demos/Hopper-v4_300.npz\ndemos: copy error MSE(a_t-1, a_t)/Var(a) = ")
     assert (workdir / "demos" / "Hopper-v4_300.npz").stat().st_mtime_ns == made, "it only loads the file, never rewrites it"
     assert "seed 1 | training" in result.stdout.splitlines()
-    assert re.search(r"^seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| \d+\.\d+ ms/step \| job ETA \d+\.\d min$", result.stdout, re.M)
+    assert re.search(r"^seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| \d+\.\d+ ms/step \| \d+\.\d min left$", result.stdout, re.M)
     check_result(result, workdir, "bc_oh", [1])
 
 
@@ -74,29 +75,31 @@ def test_bc_so_smoke_run_with_two_seeds(workdir):
     assert summary["scores"]["1"]["score"] != summary["scores"]["2"]["score"]
 
 
-def test_c2f_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
-    result = smoke("c2f.py", workdir, "--two-stage", "--fusion", "middle", "--coarse-output", "feature", "--save-model")
+def test_c2f_table3_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
+    result = smoke("c2f_table3.py", workdir, "--two-stage", "--fusion", "middle", "--coarse-output", "feature", "--save-model")
     assert "seed 1 | stage 1: the coarse model alone" in result.stdout and "seed 1 | stage 2: the coarse model frozen" in result.stdout
-    summary = check_result(result, workdir, "c2f", [1])
+    summary = check_result(result, workdir, "c2f_table3", [1])
     assert (summary["args"]["fusion"], summary["args"]["coarse_output"], summary["args"]["two_stage"]) == ("middle", "feature", True)
-    checkpoint = torch.load(workdir / "out" / "c2f" / "seed1.pt", weights_only=False)
-    assert (checkpoint["method"], checkpoint["env_id"], checkpoint["obs_dim"], checkpoint["act_dim"]) == ("c2f", "Hopper-v4", 11, 3)
+    checkpoint = torch.load(workdir / "out" / "c2f_table3" / "seed1.pt", weights_only=False)
+    assert (checkpoint["method"], checkpoint["env_id"], checkpoint["obs_dim"], checkpoint["act_dim"]) == ("c2f_table3", "Hopper-v4", 11, 3)
     args = SimpleNamespace(**checkpoint["args"])
-    policy = c2f.make_policy(args, 11, 3, torch.zeros(2, 11 * args.history))
+    policy = c2f_table3.make_policy(args, 11, 3, torch.zeros(2, 11 * args.history))
     policy.load_state_dict(checkpoint["state_dict"])  # strict: the args rebuild exactly the saved model
     with np.load(workdir / "demos" / "Hopper-v4_300.npz") as demos:  # the normalisation came with the weights
-        noisy = c2f.partially_observe(demos["observations"], list(range(5, 11)), 0.2, False, seed=1)
-        inputs = c2f.stack_history(noisy, demos["episode_starts"], args.history)
+        noisy = c2f_table3.partially_observe(demos["observations"], list(range(5, 11)), 0.2, False, seed=1)
+        inputs = c2f_table3.stack_history(noisy, demos["episode_starts"], args.history)
     assert torch.allclose(policy.normalize.mean, torch.as_tensor(inputs.mean(0), dtype=torch.float32), atol=1e-5)
     assert policy(torch.as_tensor(inputs[:5], dtype=torch.float32)).shape == (5, 3)
 
 
 BAD_INPUTS = {
     "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
-    "history 0": (["--history", 0], "--history must be positive, got 0: "),
-    "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1: "),
-    "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: run python expert_ppo.py --env Hopper-v4 --make-demos"),
-    "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found in {cwd}: check the path"),
+    "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 (the paper's) or Hopper-v5"),
+    "history 0": (["--history", 0], "--history must be positive, got 0"),
+    "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1"),
+    "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: check --demos, or make it: "
+                     "python expert_ppo.py --env Hopper-v4 --frame-skip 4 --num-demo-samples 20000 --make-demos"),
+    "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found in {cwd}: check --demos"),
     "corrupt demos": (["--demos", "corrupt.npz"], "corrupt.npz is not a readable demo file ("),
     "wrong observation size": (["--demos", "obs5.npz"], "obs5.npz holds observations (200, 5) and actions (200, 3), but Hopper-v4 needs (N, 11) and (N, 3): "),
     "wrong action size": (["--demos", "act2.npz"], "act2.npz holds observations (200, 11) and actions (200, 2), but Hopper-v4 needs (N, 11) and (N, 3): "),

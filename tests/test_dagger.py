@@ -69,27 +69,36 @@ def test_beta_decides_who_acts(expert):
     assert not np.allclose(all_expert["clean_observations"][5], all_learner["clean_observations"][5])
 
 
-def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, expert):
-    """train_seed with 50 labels over 3 rounds; evaluation replaced by a fingerprint of the weights, so
+def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, tmp_path, expert):
+    """A seed with 50 labels over 3 rounds; evaluation replaced by a fingerprint of the weights, so
     the round-0 evaluations show that DAgger starts from exactly the policy bc_oh.py trains."""
-    fingerprint = lambda policy, args, episodes, seed, device: [sum(p.double().sum().item() for p in policy.parameters())] * episodes
+    def fingerprint(policy, args, episodes, seed, device):
+        return [sum(p.double().sum().item() for p in policy.parameters())] * episodes
+
+    collected, collect_round = [], dagger.collect_round
+
+    def recorded_collect_round(*arguments):
+        collected.append(collect_round(*arguments))
+        return collected[-1]
+
     monkeypatch.setattr(dagger, "evaluate", fingerprint)
     monkeypatch.setattr(bc_oh, "evaluate", fingerprint)
+    monkeypatch.setattr(dagger, "collect_round", recorded_collect_round)
     demos = fake_demos(n=256)
     args = tiny_args(dagger, expert=EXPERT, dagger_samples=50, dagger_rounds=3, dagger_epochs=1)
-    result = dagger.train_seed(args, demos, 1, torch.device("cpu"))
-    assert [r["labels"] for r in result["rounds"]] == [17, 17, 16]
-    assert [r["aggregate"] for r in result["rounds"]] == [256 + 17, 256 + 34, 256 + 50]
-    assert [r["beta"] for r in result["rounds"]] == pytest.approx([2 / 3, 1 / 3, 0.0])
-    data = result["dagger_data"]
+    entry = dagger.train_and_record(args, demos, 1, str(tmp_path))
+    assert [r["labels"] for r in entry["rounds"]] == [17, 17, 16]
+    assert [r["aggregate"] for r in entry["rounds"]] == [256 + 17, 256 + 34, 256 + 50]
+    assert [r["beta"] for r in entry["rounds"]] == pytest.approx([2 / 3, 1 / 3, 0.0])
+    data = {key: np.concatenate([round_data[key] for round_data in collected]) for key in collected[0]}
     assert len(data["labels"]) == len(data["inputs"]) == len(data["clean_observations"]) == 50
     assert np.array_equal(data["labels"], expert_on(expert, data["clean_observations"]))
     # evaluations: round 0 at epochs 1, 2 (as bc_oh.py), one per round after, three of the final learner
-    assert [epoch for epoch, _ in result["evaluations"]] == [1, 2, 3, 4, 5, 5, 5]
-    alone = bc_oh.train_seed(tiny_args(bc_oh), demos, 1, torch.device("cpu"))
-    assert result["evaluations"][:2] == alone["evaluations"]
-    assert result["bc_oh_score"] == np.mean([ret for _, ret in alone["evaluations"]])
-    assert result["evaluations"][2][1] != alone["evaluations"][-1][1], "the learner trains on after round 0"
+    assert [epoch for epoch, _ in entry["evaluations"]] == [1, 2, 3, 4, 5, 5, 5]
+    alone, _, _ = bc_oh.train_seed(tiny_args(bc_oh), demos, 1, torch.device("cpu"))
+    assert entry["evaluations"][:2] == alone
+    assert entry["bc_oh_score"] == np.mean([ret for _, ret in alone])
+    assert entry["evaluations"][2][1] != alone[-1][1], "the learner trains on after round 0"
 
 
 def test_bad_dagger_settings_are_rejected(tmp_path):

@@ -1,5 +1,6 @@
 """fca.py: the adversary is conditioned on a_t, the alternating updates push its loss in opposite
-directions, previous actions follow the episode structure, bad input, and a smoke run."""
+directions, previous actions follow the episode structure, each learning rate decays from its own
+start, bad input, and a smoke run."""
 import numpy as np
 import pytest
 import torch
@@ -119,7 +120,10 @@ def test_batchnorm_is_frozen_at_evaluation_and_a_reloaded_model_acts_the_same():
     its saved state_dict (as scripts/evaluate.py does, on zero inputs) gives the same actions."""
     args = fca.Args(hidden=16, embedding_dim=EMBEDDING, eval_episodes=2)
     policy = fca.make_policy(args, OBS, ACT, torch.randn(100, OBS * HISTORY))
-    stats = lambda: [buffer.clone() for name, buffer in policy.named_buffers() if "running" in name]
+
+    def stats():
+        return [buffer.clone() for name, buffer in policy.named_buffers() if "running" in name]
+
     before = stats()
     policy_optimizer, adversary_optimizer = optimizers(policy)
     for seed in range(3):
@@ -135,6 +139,25 @@ def test_batchnorm_is_frozen_at_evaluation_and_a_reloaded_model_acts_the_same():
     rebuilt.load_state_dict(policy.state_dict())
     assert torch.equal(rebuilt.eval()(history), policy(history))
     assert not torch.allclose(policy.train()(history), policy.eval()(history)), "in eval mode the running statistics act"
+
+
+def test_each_learning_rate_decays_from_its_own_start_and_the_adversary_error_is_the_epoch_mean(monkeypatch, capsys):
+    """fit decays G's and F's rate and D's (a group of its own) linearly to 0, each from its own start, and prints
+    D's mean loss over the epoch."""
+    monkeypatch.setattr(fca, "evaluate", lambda *args: [0.0])
+    args = fca.Args(epochs=2, batch_size=10, eval_every=1, learning_rate=1e-3, seeds=[1])
+    weights = [torch.nn.Parameter(torch.zeros(1)) for _ in range(2)]
+    optimizer = torch.optim.Adam([{"params": weights[:1]}, {"params": weights[1:], "lr": 3e-3}], lr=1e-3)
+    rates = []
+
+    def train_step(idx):
+        rates.append([group["lr"] for group in optimizer.param_groups])
+        return torch.tensor(0.5), torch.tensor(float(len(rates)))  # D's losses 1, 2 | 3, 4
+
+    fca.fit(args, torch.nn.Linear(1, 1), optimizer, train_step, 20, seed=1, device=torch.device("cpu"))
+    assert rates == [[1e-3 * (1 - step / 4), 3e-3 * (1 - step / 4)] for step in range(4)]
+    errors = [line.split("| adversary error ")[1].split(" |")[0] for line in capsys.readouterr().out.splitlines()]
+    assert errors == ["1.50000", "3.50000"]
 
 
 def test_the_authors_hopper_setting_and_their_default_elsewhere():

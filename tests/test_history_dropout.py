@@ -1,4 +1,4 @@
-"""history_dropout.py: dropout reaches the past frames only, only in training; bad input; a smoke run."""
+"""history_dropout.py: dropout reaches the past frames only, in training only; bad rates; a run."""
 
 import pytest
 import torch
@@ -7,21 +7,24 @@ import history_dropout
 from conftest import assert_usage_error, run_in_process, smoke_run
 
 OBS, ACT, HISTORY = 11, 3, 3
+PAST = (HISTORY - 1) * OBS
+"""the entries of the past frames [o_{t-H+1}, ..., o_{t-1}]: the first of the history"""
 
 
 def small_policy(rate):
     torch.manual_seed(0)
-    return history_dropout.Policy(
-        OBS, ACT, HISTORY, hidden=16, rate=rate, inputs=torch.randn(100, OBS * HISTORY) * 3 + 1
-    )
+    inputs = torch.randn(100, OBS * HISTORY) * 3 + 1
+    return history_dropout.Policy(OBS, ACT, HISTORY, hidden=16, rate=rate, inputs=inputs)
 
 
 def mlp_inputs(policy, history, draws):
     """What the MLP sees in `draws` forward passes of the same batch."""
     seen = []
-    handle = policy.net.register_forward_pre_hook(
-        lambda module, args: seen.append(args[0].detach().clone())
-    )
+
+    def record(module, args):
+        seen.append(args[0].detach().clone())
+
+    handle = policy.net.register_forward_pre_hook(record)
     for _ in range(draws):
         policy(history)
     handle.remove()
@@ -29,20 +32,18 @@ def mlp_inputs(policy, history, draws):
 
 
 def test_current_frame_is_never_dropped_and_past_frames_are_in_training():
-    rate, policy = 0.5, small_policy(0.5)
+    rate = 0.5
+    policy = small_policy(rate)
     history = torch.randn(512, OBS * HISTORY)
-    normalized = policy.normalize(history)
-    seen = mlp_inputs(policy.train(), history, draws=20)  # 10240 samples, 225280 past entries
-    past = (HISTORY - 1) * OBS
-    assert torch.equal(seen[:, :, past:], normalized[:, past:].expand(20, -1, -1)), (
-        "o_t must reach the MLP untouched"
-    )
-    dropped = seen[:, :, :past] == 0
+    normalized = policy.normalize(history).expand(20, -1, -1)
+    # 20 draws of 512 samples: 225280 past entries.
+    seen = mlp_inputs(policy.train(), history, draws=20)
+    assert torch.equal(seen[:, :, PAST:], normalized[:, :, PAST:]), "o_t reaches the MLP untouched"
+    dropped = seen[:, :, :PAST] == 0
     assert dropped.float().mean().item() == pytest.approx(rate, abs=0.01)
-    kept = normalized[:, :past].expand(20, -1, -1)[~dropped]
-    assert torch.allclose(seen[:, :, :past][~dropped], kept / (1 - rate)), (
-        "kept past entries are scaled by 1 / (1 - rate)"
-    )
+    # torch's Dropout scales the entries it keeps by 1 / (1 - rate).
+    kept = normalized[:, :, :PAST][~dropped]
+    assert torch.allclose(seen[:, :, :PAST][~dropped], kept / (1 - rate))
 
 
 def test_evaluation_is_deterministic_and_drops_nothing():
@@ -58,16 +59,15 @@ def test_evaluation_is_deterministic_and_drops_nothing():
 
 
 def test_rate_zero_is_bc_oh():
-    policy, history = small_policy(0.0).train(), torch.randn(8, OBS * HISTORY)
+    policy = small_policy(0.0).train()
+    history = torch.randn(8, OBS * HISTORY)
     assert torch.equal(policy(history), policy.net(policy.normalize(history)))
 
 
 @pytest.mark.parametrize("rate", [1, 1.5, -0.1])
 def test_rate_outside_zero_one_is_rejected(rate):
-    assert_usage_error(
-        run_in_process("history_dropout.py", "--history-dropout", rate),
-        "--history-dropout must lie in [0, 1)",
-    )
+    result = run_in_process("history_dropout.py", "--history-dropout", rate)
+    assert_usage_error(result, "--history-dropout must lie in [0, 1)")
 
 
 def test_smoke_run(tmp_path):

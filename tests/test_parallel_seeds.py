@@ -57,8 +57,8 @@ def test_workers_must_be_positive():
 def test_a_pool_worker_writes_each_printed_line_at_once(monkeypatch):
     """Unbuffered (PYTHONUNBUFFERED, as this machine and the grid runner set it), print writes a line and its newline
     in two writes, and a seed printing at the same moment can land between them (test_two_workers_train_each_seed_as_one_worker_does failed so, twice: one
-    seed's line glued to another's. train_and_record, in a pool worker, makes each line one write and leaves Ctrl-C to
-    the main process (in the main process, with one worker, it leaves both alone)."""
+    seed's line glued to another's. start_worker, the pool's initializer, makes each line one write and leaves Ctrl-C
+    to the main process."""
     import io
     import signal
 
@@ -80,20 +80,11 @@ def test_a_pool_worker_writes_each_printed_line_at_once(monkeypatch):
     print("seed 1 | epoch 1/3", flush=True)
     assert raw.writes == [b"seed 1 | epoch 1/3", b"\n"]
 
-    class Trained(Exception): ...
-
-    def train_seed(*args):  # stop train_and_record once it has set its process up
-        raise Trained(signal.getsignal(signal.SIGINT))
-
-    monkeypatch.setattr(bc_oh, "train_seed", train_seed)
     previous = signal.getsignal(signal.SIGINT)
     try:
-        with pytest.raises(Trained) as main_process:
-            bc_oh.train_and_record(bc_oh.Args(), {}, 1, "unused")
-        assert main_process.value.args[0] is previous and raw.writes[2:] == [b"seed 1 | training", b"\n"]
-        monkeypatch.setattr(bc_oh.multiprocessing, "parent_process", lambda: object())  # as in a pool worker
-        with pytest.raises(Trained) as worker:
-            bc_oh.train_and_record(bc_oh.Args(), {}, 2, "unused")
-        assert worker.value.args[0] is signal.SIG_IGN and raw.writes[4:] == [b"seed 2 | training\n"]
+        bc_oh.start_worker()  # what the pool runs first in each worker
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN, "Ctrl-C is the main process's"
+        print("seed 2 | training", flush=True)
+        assert raw.writes[2:] == [b"seed 2 | training\n"]
     finally:
         signal.signal(signal.SIGINT, previous)

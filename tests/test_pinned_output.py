@@ -55,34 +55,34 @@ PINNED = {
     "bc_oh_hidden": ("bc_oh", ["--hide-velocities"],
         ["epoch 1/3 | loss 0.38415 | last eval 21.6", "epoch 2/3 | loss 0.40119 | last eval 24.5", "epoch 3/3 | loss 0.40038 | last eval 25.7"],
         [21.550929826220223, 24.45770861809345, 25.652883571384997]),
-    "c2f_output_fs1": ("c2f", ["--fusion", "output", "--frame-skip", 1],
+    "c2f_output_fs1": ("c2f_table3", ["--fusion", "output", "--frame-skip", 1],
         ["epoch 1/3 | loss 0.76668 | last eval 8.0", "epoch 2/3 | loss 0.99929 | last eval 8.2", "epoch 3/3 | loss 0.95021 | last eval 8.2"],
         [7.991499029603305, 8.18671976969248, 8.248357507659978]),
-    "c2f_two_stage": ("c2f", ["--two-stage"],
+    "c2f_two_stage": ("c2f_table3", ["--two-stage"],
         ["epoch 1/3 | loss 0.36140 | last eval n/a", "epoch 2/3 | loss 0.37972 | last eval n/a", "epoch 3/3 | loss 0.35987 | last eval n/a", "epoch 1/3 | loss 0.36602 | last eval 172.0", "epoch 2/3 | loss 0.37594 | last eval 107.5", "epoch 3/3 | loss 0.37445 | last eval 95.1"],
         [172.02843370688328, 107.52890702862337, 95.09800347687337]),
-    "c2f_middle": ("c2f", ["--fusion", "middle", "--hide-velocities"],
+    "c2f_middle": ("c2f_table3", ["--fusion", "middle", "--hide-velocities"],
         ["epoch 1/3 | loss 0.74418 | last eval 38.2", "epoch 2/3 | loss 0.78286 | last eval 39.8", "epoch 3/3 | loss 0.76615 | last eval 40.4"],
         [38.24394387184827, 39.802760374833426, 40.41556138311377]),
-    "c2f_early": ("c2f", ["--fusion", "early", "--hide-velocities"],
+    "c2f_early": ("c2f_table3", ["--fusion", "early", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75365 | last eval 29.2", "epoch 2/3 | loss 0.79096 | last eval 29.9", "epoch 3/3 | loss 0.77317 | last eval 30.5"],
         [29.24531597562342, 29.908453222002052, 30.450676017948314]),
-    "c2f_penultimate": ("c2f", ["--fusion", "penultimate", "--hide-velocities"],
+    "c2f_penultimate": ("c2f_table3", ["--fusion", "penultimate", "--hide-velocities"],
         ["epoch 1/3 | loss 0.72177 | last eval 38.4", "epoch 2/3 | loss 0.75806 | last eval 39.4", "epoch 3/3 | loss 0.74964 | last eval 38.8"],
         [38.41211870295702, 39.421973277920486, 38.80078297540449]),
-    "c2f_feature": ("c2f", ["--coarse-output", "feature", "--hide-velocities"],
+    "c2f_feature": ("c2f_table3", ["--coarse-output", "feature", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75064 | last eval 156.0", "epoch 2/3 | loss 0.78470 | last eval 157.6", "epoch 3/3 | loss 0.77423 | last eval 159.0"],
         [156.00988925991166, 157.60431646315612, 159.01969606819398]),
-    "c2f_coarse_history": ("c2f", ["--coarse-input", "history", "--hide-velocities"],
+    "c2f_coarse_history": ("c2f_table3", ["--coarse-input", "history", "--hide-velocities"],
         ["epoch 1/3 | loss 0.74170 | last eval 23.6", "epoch 2/3 | loss 0.78158 | last eval 24.2", "epoch 3/3 | loss 0.78142 | last eval 24.0"],
         [23.59313855017924, 24.234180457125486, 24.04523089884483]),
-    "c2f_coarse_history_policy_current": ("c2f", ["--coarse-input", "history", "--policy-input", "current", "--hide-velocities"],
+    "c2f_coarse_history_policy_current": ("c2f_table3", ["--coarse-input", "history", "--policy-input", "current", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75807 | last eval 43.9", "epoch 2/3 | loss 0.78946 | last eval 42.9", "epoch 3/3 | loss 0.78553 | last eval 41.7"],
         [43.943607880611765, 42.88653846039645, 41.68191756711971]),
-    "c2f_no_stop_gradient": ("c2f", ["--no-stop-gradient", "--hide-velocities"],
+    "c2f_no_stop_gradient": ("c2f_table3", ["--no-stop-gradient", "--hide-velocities"],
         ["epoch 1/3 | loss 0.73226 | last eval 42.8", "epoch 2/3 | loss 0.77278 | last eval 42.7", "epoch 3/3 | loss 0.75966 | last eval 41.5"],
         [42.82993645942999, 42.653890778644694, 41.49852599926946]),
-    "c2f_no_coarse": ("c2f", ["--no-coarse-action", "--hide-velocities"],
+    "c2f_no_coarse": ("c2f_table3", ["--no-coarse-action", "--hide-velocities"],
         ["epoch 1/3 | loss 0.36717 | last eval 41.6", "epoch 2/3 | loss 0.38409 | last eval 41.6", "epoch 3/3 | loss 0.38078 | last eval 40.6"],
         [41.574384115404115, 41.60107246166403, 40.57713920090737]),
     "fca": ("fca", [],  # re-recorded for the authors' BatchNorm encoder (issue 33), on an AMD EPYC (Zen 4)
@@ -126,6 +126,16 @@ def test_a_run_prints_the_pinned_losses_and_evaluations(tmp_path, case):
     printed, evaluations, _ = tiny_run(tmp_path, script, flags, FIXED_MODE)
     assert printed == lines
     assert evaluations == pytest.approx(returns, rel=CASE_TOLERANCE.get(case, PIN_TOLERANCE))
+
+
+@needs_mkl
+@needs_pinned_cpu
+def test_c2f_table3_at_its_defaults_prints_c2fs_pinned_digits(tmp_path):
+    """c2f_table3.py without a flag is c2f.py: the epoch lines and evaluations of the "c2f" pin."""
+    _, flags, lines, returns = PINNED["c2f"]
+    printed, evaluations, _ = tiny_run(tmp_path, "c2f_table3", flags, FIXED_MODE)
+    assert printed == lines
+    assert evaluations == pytest.approx(returns, rel=PIN_TOLERANCE)
 
 
 @needs_mkl

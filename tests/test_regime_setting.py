@@ -99,8 +99,8 @@ def test_hidden_velocities_train_on_zeroed_velocities(monkeypatch):
     """The normaliser saw zero velocities (mean 0) and real positions: train_seed hid them."""
     monkeypatch.setattr(bc_oh, "evaluate", lambda policy, args, episodes, seed, device: [0.0])
     demos = fake_demos()
-    result = bc_oh.train_seed(tiny_args(bc_oh, hide_velocities=True), demos, 1, torch.device("cpu"))
-    mean = result["policy"].normalize.mean.reshape(2, 11)
+    _, policy, _ = bc_oh.train_seed(tiny_args(bc_oh, hide_velocities=True), demos, 1, torch.device("cpu"))
+    mean = policy.normalize.mean.reshape(2, 11)
     assert (mean[:, HOPPER_VELOCITIES] == 0).all() and (mean[:, POSITIONS] != 0).all()
 
 

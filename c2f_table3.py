@@ -1,0 +1,648 @@
+# C2F's ablations (paper Table 3, section 5.3) and the capacity control; see README.md
+"""c2f.py with the choices of Table 3 open, each flag an ablation of one part of C2F. At its
+defaults this file is c2f.py: the same model, the same weights, the same printed digits.
+
+    --fusion              where sg(zeta) joins the policy model: late, into the last layer (the
+                          paper's); output, into a layer after pi_theta's action-sized output;
+                          middle, into pi_theta's second layer; early, beside the input frames;
+                          penultimate, into the last layer of BC-OH's two-hidden-layer MLP
+    --coarse-output       feature: the coarse model passes on its last hidden feature, not zeta
+    --coarse-input        history: the coarse model reads the whole history (BC-OH as pi_phi)
+    --policy-input        current: the policy model reads only o_t (BC-SO as pi_theta)
+    --no-stop-gradient    the final action's loss trains the coarse model too
+    --two-stage           train the coarse model alone first, freeze it, then train the rest
+    --no-coarse-action    the capacity control: zeros in place of sg(zeta), and no coarse loss
+
+    python c2f_table3.py --env Hopper-v4 --fusion early --hide-velocities
+"""
+
+import functools
+import json
+import multiprocessing
+import os
+import signal
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import torch
+import torch.nn as nn
+import tyro
+
+METHOD = "c2f_table3"
+
+
+@dataclass
+class Args:
+    """C2F and its ablations of Table 3, on MuJoCo (paper section 5.3); the defaults: c2f.py."""
+
+    exp_name: str = os.path.basename(__file__)[: -len(".py")]
+    """the name of this experiment, part of the default output folder"""
+    env: str = "Hopper-v4"
+    """gymnasium MuJoCo env id with its version (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
+    frame_skip: int | None = None
+    """simulator steps per action; None: the env's own"""
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
+    """training seeds, one run each; the result is their mean ± std"""
+    workers: int | None = None
+    """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
+    demos: str | None = None
+    """demonstrations (.npz); None: demos/<env>_<N>.npz, made by expert_ppo.py --make-demos"""
+    num_demo_samples: int | None = None
+    """demonstration steps; None: 20000 for Hopper, 10000 otherwise (--demos: the whole file)"""
+    obs_noise_std: float = 0.2
+    """std of the Gaussian noise on the velocity entries of each observation"""
+    hide_velocities: bool = False
+    """set the velocity entries to zero instead of adding noise (positions only)"""
+    history: int = 2
+    """frames in the observation history"""
+    epochs: int = 1000
+    """passes over the demonstrations, in minibatches drawn with replacement"""
+    batch_size: int = 64
+    """minibatch size"""
+    learning_rate: float | None = None
+    """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
+    hidden: int = 256
+    """width of the hidden layers"""
+    eval_every: int = 100
+    """evaluate every this many epochs and after the last; a seed's score: the mean of the last 3"""
+    eval_episodes: int = 10
+    """episodes per evaluation"""
+    output_dir: str | None = None
+    """folder of the results and models; None: runs/<env>__<exp-name>__<unix time>"""
+    save_model: bool = False
+    """save each seed's policy (weights, normalisation, args)"""
+    cuda: bool = False
+    """train on the GPU"""
+    fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
+    """where sg(zeta) joins pi_theta: late (the paper's), output, middle, early, penultimate"""
+    coarse_output: Literal["action", "feature"] = "action"
+    """what the coarse model passes on: its action zeta (the paper's) or its last hidden feature"""
+    coarse_input: Literal["current", "history"] = "current"
+    """the coarse model's input: the current frame o_t (the paper's) or the whole history"""
+    policy_input: Literal["history", "current"] = "history"
+    """the policy model's input: the whole history (the paper's) or the current frame o_t"""
+    stop_gradient: bool = True
+    """stop the final loss's gradient at zeta (the paper's); no: it trains the coarse model too"""
+    coarse_action: bool = True
+    """feed sg(zeta) to the policy model; no: zeros and no coarse loss (the capacity control)"""
+    two_stage: bool = False
+    """train the coarse model alone for --epochs and freeze it, then the rest for --epochs"""
+
+
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+# ---- The method: C2F's networks, loss and training loop, with Table 3's ablations ----
+# Copied from bc_oh.mlp..Normalizer
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+    """The paper's three-layer MLP (section 8.3)."""
+    layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
+    return nn.Sequential(*layers, nn.Linear(hidden, out_dim))
+
+
+class Normalizer(nn.Module):
+    """Standardises inputs with statistics of the training inputs, saved with the model."""
+
+    def __init__(self, inputs: torch.Tensor):
+        super().__init__()
+        self.register_buffer("mean", inputs.mean(0))
+        self.register_buffer("std", inputs.std(0).clamp_min(1e-6))
+
+    def forward(self, x):
+        return (x - self.mean) / self.std
+
+
+class Policy(nn.Module):
+    """C2F as the paper draws it (section 8.3, Fig. 10), with the ablations of Table 3 open."""
+
+    def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
+        super().__init__()
+        self.normalize = Normalizer(inputs)
+        self.args = args
+        hidden = args.hidden
+        # --coarse-input and --policy-input: each model reads the history, or its last frame o_t.
+        self.coarse_width = obs_dim
+        if args.coarse_input == "history":
+            self.coarse_width = obs_dim * args.history
+        self.policy_width = obs_dim * args.history
+        if args.policy_input == "current":
+            self.policy_width = obs_dim
+        # The coarse model pi_phi: BC-SO's MLP on the current frame o_t; its output is zeta.
+        self.coarse = mlp(self.coarse_width, act_dim, hidden)
+        # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
+        fed = act_dim
+        if args.coarse_output == "feature":
+            fed = hidden
+        # The policy model pi_theta: three layers on the whole history, split after the first.
+        # --fusion early and middle: sg(zeta) joins the input of its first or second layer.
+        first_in = self.policy_width
+        if args.fusion == "early":
+            first_in += fed
+        self.policy_first = nn.Sequential(nn.Linear(first_in, hidden), nn.ReLU())
+        second_in = hidden
+        if args.fusion == "middle":
+            second_in += fed
+        layers = [nn.Linear(second_in, hidden), nn.ReLU()]
+        if args.fusion == "output":
+            # pi_theta is BC-OH's MLP: it ends in an action, without a ReLU.
+            layers.append(nn.Linear(hidden, act_dim))
+        elif args.fusion != "penultimate":
+            layers += [nn.Linear(hidden, hidden), nn.ReLU()]
+        # --fusion penultimate: two layers, so with the head pi_theta is BC-OH's MLP.
+        self.policy_rest = nn.Sequential(*layers)
+        # One more fully-connected layer maps [pi_theta's feature, sg(zeta)] to the final action.
+        head_in = hidden
+        if args.fusion == "output":
+            head_in = act_dim
+        if args.fusion in ("late", "output", "penultimate"):
+            head_in += fed
+        self.head = nn.Linear(head_in, act_dim)
+
+    def coarse_model(self, obs_history):
+        """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
+        coarse_feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
+        zeta = self.coarse[-1](coarse_feature)
+        return zeta, coarse_feature
+
+    def coarse_and_final(self, obs_history):
+        """zeta and the final action: the two outputs that Eq. 2 trains."""
+        args = self.args
+        zeta, coarse_feature = self.coarse_model(obs_history)
+        fed = zeta
+        if args.coarse_output == "feature":
+            fed = coarse_feature
+        # detach() is the stop-gradient sg: the final action's loss does not train the coarse model.
+        if args.stop_gradient:
+            fed = fed.detach()
+        # The capacity control: zeros in place of sg(zeta), no coarse information for pi_theta.
+        if not args.coarse_action:
+            fed = torch.zeros_like(fed)
+        h = self.normalize(obs_history)[:, -self.policy_width :]
+        if args.fusion == "early":
+            h = torch.cat([h, fed], dim=1)
+        h = self.policy_first(h)
+        if args.fusion == "middle":
+            h = torch.cat([h, fed], dim=1)
+        h = self.policy_rest(h)
+        if args.fusion in ("late", "output", "penultimate"):
+            h = torch.cat([h, fed], dim=1)
+        final = self.head(h)
+        return zeta, final
+
+    def forward(self, obs_history):
+        zeta, final = self.coarse_and_final(obs_history)
+        return final
+
+
+def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Module:
+    return Policy(obs_dim, act_dim, inputs, args)
+
+
+# Copied from bc_oh.stack_history
+def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
+    """Row t holds [o_{t-H+1}, ..., o_t]; before an episode's start, its first frame repeated."""
+    index = np.arange(len(observations))
+    first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
+    frames = []
+    for lag in range(history - 1, -1, -1):
+        frames.append(observations[np.maximum(index - lag, first_of_episode)])
+    return np.concatenate(frames, axis=1)
+
+
+def train_seed(args, demos: dict, seed: int, device) -> tuple:
+    """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
+    if args.two_stage and not args.coarse_action:
+        both = "--two-stage trains the coarse model first, --no-coarse-action never uses it"
+        raise UsageError(f"{both}: pass one of them")
+    torch.manual_seed(seed)
+    env = make_env(args.env)
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
+    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    dims = velocity_dims(env, args.env)
+    noisy = partially_observe(
+        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
+    )
+    history = stack_history(noisy, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
+    targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
+    policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
+
+    def train_step(idx, stage=None):
+        zeta, final = policy.coarse_and_final(inputs[idx])
+        final_loss = ((final - targets[idx]) ** 2).mean()
+        coarse_loss = ((zeta - targets[idx]) ** 2).mean()
+        if stage == "coarse":
+            # Two-stage training, stage 1: the coarse model alone, on its own loss.
+            loss = coarse_loss
+        elif stage == "final" or not args.coarse_action:
+            # Stage 2, and the capacity control (it never uses the coarse model): the final loss.
+            loss = final_loss
+        else:
+            # Eq. 2: the final action's and zeta's mean squared errors to the expert's actions.
+            loss = final_loss + coarse_loss
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss
+
+    if args.two_stage:
+        print(f"seed {seed} | stage 1: the coarse model alone (no evaluations)", flush=True)
+        coarse_step = functools.partial(train_step, stage="coarse")
+        fit(args, policy, optimizer, coarse_step, len(inputs), seed, device, evaluate_policy=False)
+        # One Adam for both stages: it steps only the parameters that have a gradient.
+        policy.coarse.requires_grad_(False)
+        print(f"seed {seed} | stage 2: the coarse model frozen, the rest trained", flush=True)
+        # Stage 2 is the training loop below, on the final loss.
+        train_step = functools.partial(train_step, stage="final")
+    evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
+    return evaluations, policy, ms_per_step
+
+
+def fit(
+    args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True
+) -> tuple:
+    """The training loop: random minibatches, a linearly decaying learning rate, evaluations
+    (none with evaluate_policy=False: the first stage of two-stage training)."""
+    steps_per_epoch = num_samples // args.batch_size
+    total_steps = args.epochs * steps_per_epoch
+    generator = torch.Generator(device=device).manual_seed(seed)
+    evaluations = []
+    step = 0
+    train_time = 0.0
+    start = time.time()
+    for epoch in range(1, args.epochs + 1):
+        epoch_start = time.time()
+        for _ in range(steps_per_epoch):
+            # The learning rate decays linearly to 0 (section 8.3).
+            for group in optimizer.param_groups:
+                group["lr"] = args.learning_rate * (1 - step / total_steps)
+            idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
+            loss = train_step(idx)
+            step += 1
+        # item() waits for the GPU too, so train_time counts the whole training.
+        last_loss = loss.item()
+        train_time += time.time() - epoch_start
+        evaluating = epoch % args.eval_every == 0 or epoch == args.epochs
+        if evaluate_policy and evaluating:
+            policy.eval()
+            returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
+            evaluations.append((epoch, float(np.mean(returns))))
+            policy.train()
+        if evaluating or epoch % max(1, args.epochs // 20) == 0:
+            last_return = "n/a"
+            if evaluations:
+                last_return = f"{evaluations[-1][1]:.1f}"
+            ms_per_step = 1000 * train_time / step
+            minutes_left = (time.time() - start) / epoch * (args.epochs - epoch) / 60
+            progress = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f}"
+            progress += f" | last eval {last_return} | {ms_per_step:.2f} ms/step"
+            print(f"{progress} | {minutes_left:.1f} min left", flush=True)
+    return evaluations, 1000 * train_time / step
+
+
+# ---- Evaluation ----
+# Copied from bc_oh.evaluate..run
+@torch.no_grad()
+def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
+    """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
+    dims = velocity_dims(make_env(args.env), args.env)
+    env_fns = [functools.partial(make_sensor_env, args, dims, seed + i) for i in range(episodes)]
+    autoreset = gym.vector.AutoresetMode.SAME_STEP
+    envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
+    low = envs.single_action_space.low
+    high = envs.single_action_space.high
+    obs, _ = envs.reset(seed=seed)
+    # The history starts as the first frame repeated, as stack_history does.
+    frames = np.repeat(obs[:, None], args.history, axis=1)
+    returns = np.zeros(episodes)
+    running = np.ones(episodes, dtype=bool)
+    while running.any():
+        inputs = torch.as_tensor(frames.reshape(episodes, -1), dtype=torch.float32, device=device)
+        actions = policy(inputs).cpu().numpy().clip(low, high)
+        obs, reward, terminated, truncated, _ = envs.step(actions)
+        # Each env plays one episode: what comes after its end does not count.
+        returns[running] += reward[running]
+        running &= ~(terminated | truncated)
+        frames = np.concatenate([frames[:, 1:], obs[:, None]], axis=1)
+    envs.close()
+    return returns.tolist()
+
+
+# ---- The env and its partial observability (section 5.1) ----
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
+    """The gymnasium env, at another control rate when frame_skip is given."""
+    if "-v" not in env_id:
+        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
+    try:
+        env = gym.make(env_id)
+    except Exception as error:
+        # gymnasium raises several error types for unknown or broken ids.
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
+    # The same duration of an episode, and the same scale of returns, at the new rate.
+    steps = round(env.spec.max_episode_steps * native / frame_skip)
+    env = gym.make(env_id, max_episode_steps=steps)
+    env.unwrapped.frame_skip = frame_skip
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+
+
+V4_VELOCITIES = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
+"""the velocity entries [start, end) of the v4 envs' observations"""
+
+
+def velocity_dims(env: gym.Env, env_id: str) -> list:
+    """The indices of the joint velocities in an observation: where the noise goes."""
+    structure = getattr(env.unwrapped, "observation_structure", None)
+    if structure:
+        # v5 envs describe their layout: positions first, then the qvel block.
+        return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
+    family = env_id.split("-")[0]
+    if family not in V4_VELOCITIES:
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use a v5 env")
+    start, end = V4_VELOCITIES[family]
+    return list(range(start, end))
+
+
+class PartialObservation(gym.ObservationWrapper):
+    """The sensor: fresh N(0, std^2) noise on the velocities at each step, or zeros there."""
+
+    def __init__(self, env: gym.Env, dims: list, std: float, hide: bool, seed: int):
+        super().__init__(env)
+        self.dims = np.asarray(dims)
+        self.std = std
+        self.hide = hide
+        self.rng = np.random.default_rng(seed)
+
+    def observation(self, obs):
+        obs = np.array(obs, dtype=np.float64)
+        if self.hide:
+            obs[self.dims] = 0.0
+        else:
+            obs[self.dims] += self.rng.normal(0.0, self.std, len(self.dims))
+        return obs
+
+
+def make_sensor_env(args, dims: list, seed: int) -> gym.Env:
+    env = make_env(args.env, args.frame_skip)
+    return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
+
+
+def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
+    """What the sensor shows of the demos: the same noise, drawn once per sample."""
+    observed = observations.copy()
+    rng = np.random.default_rng(seed)
+    if hide:
+        observed[:, dims] = 0.0
+    else:
+        observed[:, dims] += rng.normal(0.0, std, (len(observed), len(dims)))
+    return observed
+
+
+def print_mujoco_warning(text: str):
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah model each time it is made: skip that one.
+    if "settotalmass" not in text:
+        print(f"MuJoCo warning: {text}", file=sys.stderr)
+
+
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
+mujoco.set_mju_user_warning(print_mujoco_warning)
+
+
+# ---- The demonstrations, checked: a wrong file must not give a silently wrong result ----
+def load_demos(args, env: gym.Env) -> tuple:
+    """(demos, meta) from --demos or from the file `expert_ppo.py --make-demos` writes."""
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
+    native = getattr(env.unwrapped, "frame_skip", None)
+    # The paper's demo sizes (section 5.1): 20k steps for Hopper, 10k for the others.
+    n = args.num_demo_samples
+    if n is None:
+        n = 10000
+        if args.env.startswith("Hopper"):
+            n = 20000
+    path = args.demos
+    if path is None and args.frame_skip == native:
+        path = f"demos/{args.env}_{n}.npz"
+    elif path is None:
+        path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
+    make = f"expert_ppo.py --env {args.env} --frame-skip {args.frame_skip} --num-demo-samples {n}"
+    if not os.path.isfile(path):
+        where = f"demo file {path} not found in {os.getcwd()}"
+        raise UsageError(f"{where}: check --demos, or make it: python {make} --make-demos")
+    demos = {}
+    meta = {}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "meta" in data:
+                meta = json.loads(str(data["meta"]))
+            for key, dtype in [("observations", np.float64), ("actions", np.float32)]:
+                if key in data:
+                    demos[key] = data[key].astype(dtype)
+            if "episode_starts" in data:
+                demos["episode_starts"] = data["episode_starts"].astype(bool)
+    except Exception as error:
+        # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
+        message = f"{path} is not a readable demo file ({type(error).__name__})"
+        raise UsageError(f"{message}: see the format in README.md")
+    # A file without meta loads: it was made by someone else, at the env's own rate.
+    made_for = meta.get("env_id", args.env)
+    made_at = meta.get("frame_skip", native)
+    if made_for != args.env:
+        raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
+    if made_at != args.frame_skip:
+        raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
+    for key in ["observations", "actions", "episode_starts"]:
+        if key not in demos:
+            raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
+    obs = demos["observations"]
+    actions = demos["actions"]
+    starts = demos["episode_starts"]
+    if obs.shape[1:] != (obs_dim,) or actions.shape[1:] != (act_dim,):
+        raise UsageError(
+            f"{path} holds observations {obs.shape} and actions {actions.shape}, "
+            f"but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env"
+        )
+    if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
+        raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
+    take = args.num_demo_samples or len(obs)
+    if len(obs) < take:
+        raise UsageError(
+            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
+        )
+    if take <= args.batch_size:
+        raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
+    obs = obs[:take]
+    actions = actions[:take]
+    starts = starts[:take]
+    for key, values in [("observations", obs), ("actions", actions)]:
+        bad_rows = np.unique(np.argwhere(~np.isfinite(values))[:, 0])
+        if len(bad_rows):
+            rows = bad_rows[:3].tolist()
+            raise UsageError(f"{path}: {key} hold non-finite values at rows {rows}: fix them")
+    low = env.action_space.low
+    high = env.action_space.high
+    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
+    if len(outside):
+        raise UsageError(
+            f"{path}: actions of rows {outside[:3].tolist()} lie outside the bounds "
+            f"[{low.min():g}, {high.max():g}]: rescale or clip them"
+        )
+    if not starts[0]:
+        raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
+
+    # How well copying the last action imitates the expert: MSE(a_{t-1}, a_t) within episodes,
+    # divided by Var(a). It is 0 if actions never change, about 2 if they are unrelated.
+    step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
+    copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
+    note = ""
+    if take < len(demos["actions"]):
+        note = f" (the first {take} of its {len(demos['actions'])})"
+    print(f"demos: {take} steps from {path}{note}")
+    print(
+        f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} "
+        "(0: copying the last action is perfect; about 2: it is useless)"
+    )
+    return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
+
+
+# ---- Seeds and main: each seed in its own process, its result written when it ends ----
+def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
+    """Train one seed, save its policy if asked, and write its result at once."""
+    # Small networks gain nothing from more threads; a pool worker starts with all the cores.
+    torch.set_num_threads(1)
+    print(f"seed {seed} | training", flush=True)
+    device = torch.device("cuda" if args.cuda else "cpu")
+    evaluations, policy, ms_per_step = train_seed(args, demos, seed, device)
+    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
+    entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
+    if args.save_model:
+        checkpoint = {"method": METHOD, "env_id": args.env, "args": asdict(args)}
+        checkpoint["obs_dim"] = demos["observations"].shape[1]
+        checkpoint["act_dim"] = demos["actions"].shape[1]
+        checkpoint["state_dict"] = policy.cpu().state_dict()
+        path = os.path.join(output_dir, f"seed{seed}.pt")
+        # Write a temporary file, then rename it: an interrupted run leaves no half-written file.
+        torch.save(checkpoint, f"{path}.tmp")
+        os.replace(f"{path}.tmp", path)
+    write_result(output_dir, args, {seed: entry})
+    return entry
+
+
+def write_result(output_dir: str, args, per_seed: dict) -> str:
+    """Write result_seeds<seeds>.json: the args, each seed's score and evaluations, mean and std."""
+    scores = [entry["score"] for entry in per_seed.values()]
+    recorded = asdict(args)
+    recorded["seeds"] = list(per_seed)
+    recorded["output_dir"] = os.path.relpath(output_dir)
+    result = {"env": args.env, "method": METHOD, "args": recorded, "scores": per_seed}
+    result["mean"] = np.mean(scores)
+    result["std"] = np.std(scores)
+    seeds = "-".join(str(seed) for seed in per_seed)
+    path = Path(output_dir, f"result_seeds{seeds}.json")
+    path.write_text(json.dumps(result, indent=1))
+    return str(path)
+
+
+def start_worker():
+    # Ctrl-C reaches every process of the job; the main process alone handles it.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # One write a printed line, so the lines of parallel seeds do not mix.
+    sys.stdout.reconfigure(line_buffering=True, write_through=False)
+
+
+def run(args):
+    """Check the flags, load the demos, train every seed, print the table and mean ± std."""
+    # Sizes must be positive; None leaves a flag at its default.
+    sizes = ["history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"]
+    for name in sizes + ["learning_rate", "frame_skip", "num_demo_samples", "workers"]:
+        value = getattr(args, name)
+        if value is not None and value <= 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {value}")
+    if args.obs_noise_std < 0:
+        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+    if len(args.seeds) == 0 or len(set(args.seeds)) < len(args.seeds):
+        raise UsageError(f"--seeds needs distinct seeds, got {args.seeds}: e.g. --seeds 1 2 3")
+    if args.cuda and not torch.cuda.is_available():
+        raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
+
+    env = make_env(args.env)
+    velocity_dims(env, args.env)
+    # Fill in the per-env defaults, so that the results record them.
+    if args.frame_skip is None:
+        args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
+    make_env(args.env, args.frame_skip)
+    # The paper's learning rates (section 8.3): 1e-5 for Hopper, 1e-4 for the others.
+    if args.learning_rate is None:
+        args.learning_rate = 1e-4
+        if args.env.startswith("Hopper"):
+            args.learning_rate = 1e-5
+    demos, meta = load_demos(args, env)
+    output_dir = args.output_dir
+    if output_dir is None:
+        output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
+    os.makedirs(output_dir, exist_ok=True)
+
+    workers = min(args.workers or os.cpu_count(), len(args.seeds))
+    if args.cuda:
+        workers = 1
+    jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
+    try:
+        if workers == 1:
+            entries = [train_and_record(*job) for job in jobs]
+        else:
+            # spawn, not fork: torch and MuJoCo are not fork-safe.
+            context = multiprocessing.get_context("spawn")
+            with context.Pool(workers, initializer=start_worker) as pool:
+                entries = pool.starmap(train_and_record, jobs, chunksize=1)
+    except KeyboardInterrupt:
+        # Leaving the pool's block has stopped the workers; the finished seeds' results stay.
+        finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
+        message = "interrupted: no seed finished"
+        if finished:
+            message = f"interrupted: seeds {finished} finished, their results are in {output_dir}"
+        print(message, file=sys.stderr)
+        sys.exit(130)
+
+    per_seed = dict(zip(args.seeds, entries))
+    result_path = write_result(output_dir, args, per_seed)
+    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations)")
+    for seed, entry in per_seed.items():
+        print(f"{seed:>6} | {entry['score']:.1f}")
+    scores = [entry["score"] for entry in per_seed.values()]
+    mean = np.mean(scores)
+    seeds = "seed" if len(scores) == 1 else "seeds"
+    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} {seeds}"
+    # Demos from elsewhere (e.g. Minari) have no expert to compare with.
+    if "expert_return" in meta:
+        line += f", {mean / meta['expert_return']:.0%} of the expert's {meta['expert_return']:.0f}"
+    print(f"result: {result_path}")
+    print(line)
+
+
+if __name__ == "__main__":
+    # `kill PID` stops the job as Ctrl-C does.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        run(tyro.cli(Args))
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
