@@ -176,8 +176,8 @@ def row_lines(records: list, expert) -> list:
     c2f, bc_oh = scores_of(records, "c2f", ROW_SEEDS), scores_of(records, "bc_oh", ROW_SEEDS)
     lines = ["## Table 3 on MuJoCo (declared before its runs)", "",
              f"Seeds {seed_ranges(ROW_SEEDS)} a row, each against C2F and BC-OH seeds {seed_ranges(ROW_SEEDS)} (the map's runs; "
-             "the replication is not pooled here). Flags: what the runner adds to `c2f.py` for the row (BC-OH and BC-SO are "
-             "their own files). CARLA: the paper's Table 3, %success (mean ± std). Verdicts, as declared: 'no difference' is "
+             "the replication is not pooled here). Flags: what the runner adds to `c2f_table3.py` for the row (C2F's row is "
+             "`c2f.py`, BC-OH and BC-SO are their own files). CARLA: the paper's Table 3, %success (mean ± std). Verdicts, as declared: 'no difference' is "
              "confirmed if the interval of P(row > C2F) holds 0.5 and refuted if it excludes it; 'worse' is confirmed if it is "
              "below 0.5, refuted if above, otherwise not confirmed; 'falls to BC-OH' needs it below 0.5 and 0.5 inside the "
              "interval of P(row > BC-OH); 'falls to BC-OH or below' needs it below 0.5 and P(row > BC-OH) not above 0.5. "

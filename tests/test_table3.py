@@ -1,5 +1,6 @@
 """benchmark/table3.py on a small planted native_hidden map and replication: the declared verdicts, which seeds are
-pooled where, what is left out and why, the header's commits and machines, and the picture."""
+pooled where, what is left out and why, the header's commits and machines, and the picture. The Table 3 rows run
+c2f_table3.py; their results made by c2f.py before it held the ablations (method "c2f") count alike."""
 import json
 import subprocess
 import sys
@@ -10,19 +11,20 @@ from test_benchmark import plant
 from test_regime_summary import plant_expert, plant_variant
 
 from benchmark import table3
-from benchmark.paper import variant_flags
+from benchmark.paper import script_of, variant_flags
 from benchmark.regimes import runs_dir
+from benchmark.results import ResultError, read_result
 
 ENV = "Hopper-v4"
 
 
 def plant_run(runs, method, seed, score, **settings):
-    """A valid native_hidden result of method (a plain method file or a c2f variant, with the variant's flags) scoring
-    `score`; settings change it (e.g. hide_velocities=False)."""
+    """A valid native_hidden result of method (a plain method file, or a c2f_table3.py variant with the variant's
+    flags) scoring `score`; settings change it (e.g. hide_velocities=False)."""
     settings = {"hide_velocities": True, **variant_flags(method), **settings}
     if method in ("bc_so", "bc_oh", "c2f"):
         return plant(runs, method, ENV, seed, [score] * 3, **settings)
-    return plant_variant(runs, method, "c2f", ENV, seed, [score] * 3, **settings)
+    return plant_variant(runs, method, script_of(method), ENV, seed, [score] * 3, **settings)
 
 
 def set_machine(path, cpu, capability):
@@ -144,6 +146,34 @@ def test_rows_without_runs_say_so_and_an_incomplete_capacity_test_gives_no_verdi
     assert ("| middle fusion (`c2f_middle`) | `--fusion middle` | no runs yet | — | — | — | — | — | 49.6 ± 1.7 | no difference | "
             "no runs yet |") in table
     assert "| `--no-coarse-action` | n=1, incomplete | 600 |" in table and "incomplete (n=1 of 5): no verdict" in table
+
+
+def test_variant_results_made_by_c2f_py_before_c2f_table3_count_alike(planted):
+    """The committed Table 3 runs were made by c2f.py with the variant's flags: their JSON names the method "c2f"."""
+    results, replication, experts, _ = planted
+    summarise(results, replication, experts)
+    table = (results / "native_hidden" / "table3.md").read_text()
+    made_by_c2f = 0
+    for path in sorted(runs_dir("native_hidden", results).glob("c2f_*/*/result_seeds*.json")):
+        try:
+            result = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            continue
+        assert result["method"] == "c2f_table3"
+        result["method"] = "c2f"
+        path.write_text(json.dumps(result))
+        made_by_c2f += 1
+    assert made_by_c2f > 50
+    summarise(results, replication, experts)
+    assert (results / "native_hidden" / "table3.md").read_text() == table
+
+
+def test_a_c2f_table3_result_may_name_c2f_but_not_the_other_way(tmp_path):
+    made_by_c2f = plant(tmp_path, "c2f", ENV, 1, [5.0] * 3, fusion="middle")
+    assert read_result(made_by_c2f, "c2f_table3", ENV)["method"] == "c2f"
+    made_by_table3 = plant(tmp_path, "c2f_table3", ENV, 1, [5.0] * 3)
+    with pytest.raises(ResultError, match="holds c2f_table3 on Hopper-v4, expected c2f on Hopper-v4"):
+        read_result(made_by_table3, "c2f", ENV)
 
 
 def test_results_at_other_settings_or_seeds_are_left_out_with_their_reason(planted, capsys):
