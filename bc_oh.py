@@ -346,7 +346,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_for != args.env:
         raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
     if made_at != args.frame_skip:
-        raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
+        rates = f"frame skip {made_at}, not {args.frame_skip}"
+        raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in ["observations", "actions", "episode_starts"]:
         if key not in demos:
             raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
@@ -361,9 +362,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
-        raise UsageError(
-            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
-        )
+        steps = len(obs)
+        raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
         raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
     obs = obs[:take]
@@ -380,9 +380,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     if len(outside):
         bounds = f"[{low.min():g}, {high.max():g}]"
         rows = outside[:3].tolist()
-        raise UsageError(
-            f"{path}: actions of rows {rows} lie outside the bounds {bounds}: rescale them"
-        )
+        raise UsageError(f"{path}: actions of rows {rows} lie outside {bounds}: rescale them")
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 

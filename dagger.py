@@ -431,10 +431,11 @@ def load_demos(args, env: gym.Env) -> tuple:
         path = f"demos/{args.env}_{n}.npz"
     elif path is None:
         path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
-    make = f"expert_ppo.py --env {args.env} --frame-skip {args.frame_skip} --num-demo-samples {n}"
     if not os.path.isfile(path):
+        make = f"python expert_ppo.py --env {args.env} --frame-skip {args.frame_skip}"
+        make += f" --num-demo-samples {n} --make-demos"
         where = f"demo file {path} not found in {os.getcwd()}"
-        raise UsageError(f"{where}: check --demos, or make it: python {make} --make-demos")
+        raise UsageError(f"{where}: check --demos, or make it: {make}")
     demos = {}
     meta = {}
     try:
@@ -456,7 +457,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_for != args.env:
         raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
     if made_at != args.frame_skip:
-        raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
+        rates = f"frame skip {made_at}, not {args.frame_skip}"
+        raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in ["observations", "actions", "episode_starts"]:
         if key not in demos:
             raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
@@ -464,17 +466,15 @@ def load_demos(args, env: gym.Env) -> tuple:
     actions = demos["actions"]
     starts = demos["episode_starts"]
     if obs.shape[1:] != (obs_dim,) or actions.shape[1:] != (act_dim,):
-        raise UsageError(
-            f"{path} holds observations {obs.shape} and actions {actions.shape}, "
-            f"but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env"
-        )
+        shapes = f"observations {obs.shape} and actions {actions.shape}"
+        needs = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+        raise UsageError(f"{path} holds {shapes}, but {needs}: use demos of this env")
     if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
         raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
-        raise UsageError(
-            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
-        )
+        steps = len(obs)
+        raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
         raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
     obs = obs[:take]
@@ -489,10 +489,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     high = env.action_space.high
     outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
     if len(outside):
-        raise UsageError(
-            f"{path}: actions of rows {outside[:3].tolist()} lie outside the bounds "
-            f"[{low.min():g}, {high.max():g}]: rescale or clip them"
-        )
+        bounds = f"[{low.min():g}, {high.max():g}]"
+        rows = outside[:3].tolist()
+        raise UsageError(f"{path}: actions of rows {rows} lie outside {bounds}: rescale them")
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
@@ -504,54 +503,57 @@ def load_demos(args, env: gym.Env) -> tuple:
     if take < len(demos["actions"]):
         note = f" (the first {take} of its {len(demos['actions'])})"
     print(f"demos: {take} steps from {path}{note}")
-    print(
-        f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} "
-        "(0: copying the last action is perfect; about 2: it is useless)"
-    )
+    scale = "0: copying the last action is perfect; about 2: it is useless"
+    print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
 # ---- The expert, queried online: expert_ppo.py's deterministic policy ----
+# Copied from expert_ppo.require
 def require(condition, message: str):
-    """Refuse bad input in one line (load_expert's checks): a UsageError unless condition holds."""
+    """Refuse bad input in one line: a UsageError unless condition holds."""
     if not condition:
         raise UsageError(message)
 
 
-# fmt: off
 # Copied from expert_ppo.ExpertPolicy
 class ExpertPolicy(nn.Module):
-    """The deterministic expert: frozen obs normalisation, mean action of the actor, clipped to bounds."""
+    """The deterministic expert: frozen obs normalisation, the actor's mean action, clipped."""
 
     def __init__(self, checkpoint: dict):
         super().__init__()
-        obs_dim, act_dim, hidden = checkpoint["obs_shape"][0], checkpoint["action_shape"][0], checkpoint["hidden"]
-        hidden_layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
-        self.net = nn.Sequential(*hidden_layers, nn.Linear(hidden, act_dim))  # the actor's mean, as Agent's
+        obs_dim = checkpoint["obs_shape"][0]
+        act_dim = checkpoint["action_shape"][0]
+        hidden = checkpoint["hidden"]
+        layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
+        self.net = nn.Sequential(*layers, nn.Linear(hidden, act_dim))
         self.net.load_state_dict(checkpoint["actor"])
         for name in ("obs_mean", "obs_var", "action_low", "action_high"):
             self.register_buffer(name, checkpoint[name].float())
 
     @torch.no_grad()
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        obs = obs[..., : len(self.obs_mean)]  # an expert re-targeted to a wider observation (Ant-v5's) reads its start
+        # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
+        obs = obs[..., : len(self.obs_mean)]
         obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
         return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
 
 
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it is one and fits env_id."""
+    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
     train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
     require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy, trained_on = ExpertPolicy(checkpoint), checkpoint["env_id"]
+        policy = ExpertPolicy(checkpoint)
+        trained_on = checkpoint["env_id"]
     except Exception as error:
-        raise UsageError(f"{path} is not a readable expert checkpoint ({type(error).__name__}): re-copy or re-train it")
-    require(trained_on == env_id, f"{path} is an expert for {trained_on}, not {env_id}: pass the one made for {env_id}")
+        problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
+        raise UsageError(f"{problem}: re-copy or re-train it")
+    other = f"{path} is an expert for {trained_on}, not {env_id}"
+    require(trained_on == env_id, f"{other}: pass the one made for {env_id}")
     return policy.eval()
-# fmt: on
 
 
 # ---- Seeds and main: each seed in its own process, its result written when it ends ----

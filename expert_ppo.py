@@ -104,44 +104,40 @@ class Args:
 
 
 # ---- Env ----
-# Copied from bc_oh.UsageError..require
-class UsageError(
-    Exception
-): ...  # bad input from the user: printed as one line on stderr, exit status 2, no traceback
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-def require(
-    condition, message: str
-):  # refuse bad input in one line: a UsageError unless condition holds
+def require(condition, message: str):
+    """Refuse bad input in one line: a UsageError unless condition holds."""
     if not condition:
         raise UsageError(message)
 
 
 # Copied from bc_oh.make_env
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
+    """The gymnasium env, at another control rate when frame_skip is given."""
+    if "-v" not in env_id:
+        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
-    except Exception as error:  # gymnasium raises several error types for unknown or broken ids
-        raise UsageError(
-            f"cannot make env {env_id!r} ({error}): use a gymnasium MuJoCo id such as Hopper-v4"
-        )
-    kind, native = type(env.action_space).__name__, getattr(env.unwrapped, "frame_skip", None)
-    require(kind == "Box", f"env {env_id!r} has {kind} actions: imitation here needs Box ones")
+    except Exception as error:
+        # gymnasium raises several error types for unknown or broken ids.
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+    native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
-    require(
-        native is not None,
-        f"env {env_id!r} is not a MuJoCo env: --frame-skip needs one, leave it out",
-    )
-    env = gym.make(
-        env_id, max_episode_steps=round(env.spec.max_episode_steps * native / frame_skip)
-    )  # the same time
-    env.unwrapped.frame_skip = (
-        frame_skip  # MuJoCo envs step the simulator frame_skip times per action; dt follows
-    )
-    return gym.wrappers.TransformReward(
-        env, lambda reward: reward * frame_skip / native
-    )  # and the same return scale
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
+    # The same duration of an episode, and the same scale of returns, at the new rate.
+    steps = round(env.spec.max_episode_steps * native / frame_skip)
+    env = gym.make(env_id, max_episode_steps=steps)
+    env.unwrapped.frame_skip = frame_skip
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
 
 
 def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:

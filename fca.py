@@ -88,6 +88,7 @@ class Args:
             raise UsageError(f"--embedding-dim must be positive, got {self.embedding_dim}")
 
 
+# Copied from bc_oh.UsageError
 class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
@@ -426,10 +427,11 @@ def load_demos(args, env: gym.Env) -> tuple:
         path = f"demos/{args.env}_{n}.npz"
     elif path is None:
         path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
-    make = f"expert_ppo.py --env {args.env} --frame-skip {args.frame_skip} --num-demo-samples {n}"
     if not os.path.isfile(path):
+        make = f"python expert_ppo.py --env {args.env} --frame-skip {args.frame_skip}"
+        make += f" --num-demo-samples {n} --make-demos"
         where = f"demo file {path} not found in {os.getcwd()}"
-        raise UsageError(f"{where}: check --demos, or make it: python {make} --make-demos")
+        raise UsageError(f"{where}: check --demos, or make it: {make}")
     demos = {}
     meta = {}
     try:
@@ -451,7 +453,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_for != args.env:
         raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
     if made_at != args.frame_skip:
-        raise UsageError(f"{path} was made at frame skip {made_at}: pass --frame-skip {made_at}")
+        rates = f"frame skip {made_at}, not {args.frame_skip}"
+        raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in ["observations", "actions", "episode_starts"]:
         if key not in demos:
             raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
@@ -459,17 +462,15 @@ def load_demos(args, env: gym.Env) -> tuple:
     actions = demos["actions"]
     starts = demos["episode_starts"]
     if obs.shape[1:] != (obs_dim,) or actions.shape[1:] != (act_dim,):
-        raise UsageError(
-            f"{path} holds observations {obs.shape} and actions {actions.shape}, "
-            f"but {args.env} needs (N, {obs_dim}) and (N, {act_dim}): use demos of this env"
-        )
+        shapes = f"observations {obs.shape} and actions {actions.shape}"
+        needs = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
+        raise UsageError(f"{path} holds {shapes}, but {needs}: use demos of this env")
     if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
         raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
-        raise UsageError(
-            f"{path} holds {len(obs)} steps: pass --num-demo-samples {len(obs)} or fewer"
-        )
+        steps = len(obs)
+        raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
         raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
     obs = obs[:take]
@@ -484,10 +485,9 @@ def load_demos(args, env: gym.Env) -> tuple:
     high = env.action_space.high
     outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
     if len(outside):
-        raise UsageError(
-            f"{path}: actions of rows {outside[:3].tolist()} lie outside the bounds "
-            f"[{low.min():g}, {high.max():g}]: rescale or clip them"
-        )
+        bounds = f"[{low.min():g}, {high.max():g}]"
+        rows = outside[:3].tolist()
+        raise UsageError(f"{path}: actions of rows {rows} lie outside {bounds}: rescale them")
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
@@ -499,10 +499,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if take < len(demos["actions"]):
         note = f" (the first {take} of its {len(demos['actions'])})"
     print(f"demos: {take} steps from {path}{note}")
-    print(
-        f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} "
-        "(0: copying the last action is perfect; about 2: it is useless)"
-    )
+    scale = "0: copying the last action is perfect; about 2: it is useless"
+    print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 

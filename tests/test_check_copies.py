@@ -145,7 +145,10 @@ OWN_VERSIONS = {
     ("fca.py", "fit"): "it decays the adversary's learning rate too and logs the adversary's mean error",
     ("dagger.py", "train_and_record"): "a seed's entry also holds its bc_oh round 0 score and its rounds",
     ("average_ensemble.py", "train_and_record"): "a seed's entry also scores each ensemble member, and its result sums them up",
-    ("dagger.py", "fit"): "it trains one round: the rounds share one minibatch generator and one epoch count (the evaluation seeds)",
+    ("dagger.py", "fit"): "it trains through every round: the rounds share one minibatch generator and one epoch count (the evaluation seeds)",
+    ("average_ensemble.py", "write_result"): "its result also sums up each ensemble member's scores",
+    ("c2f_table3.py", "fit"): "--two-stage trains the coarse model first, without evaluations",
+    ("keyframe.py", "run"): "it also checks KeyFrame's own flags",
 }
 SHARED_BEFORE_THE_BANNER = {"UsageError", "fit"}
 """bc_oh's error type and training loop sit above its evaluation section (the method's section holds the loop), and

@@ -1,7 +1,9 @@
 """copycat_analysis.py: the interventions and scores on hand-made policies (a copycat scores high, a policy
 that ignores the history zero; do(zeta) of a zeta-blind policy is zero, of a pass-through the gap), and the
-script on tiny models saved by the real bc_so.py, bc_oh.py and c2f.py (bad input, the report, the pictures)."""
+script on tiny models saved by the real bc_so.py, bc_oh.py, c2f.py and c2f_table3.py (bad input, the report, the
+pictures)."""
 import argparse
+import dataclasses
 import importlib
 import json
 import os
@@ -13,6 +15,7 @@ import torch.nn as nn
 import tyro
 
 import c2f
+import c2f_table3
 import copycat_analysis as ca
 from conftest import assert_usage_error, link_experts, make_demos, run_script
 
@@ -119,12 +122,20 @@ def test_zeta_effect_of_a_zeta_blind_policy_is_zero_and_of_a_pass_through_the_ga
 def c2f_policy(zeta_weight: float):
     """A real C2F policy (late fusion) whose head passes zeta through with this weight and ignores the rest."""
     torch.manual_seed(0)
-    policy = ca.C2FPolicy(OBS, ACT, torch.randn(16, H * OBS), argparse.Namespace(history=H, hidden=8, **c2f.PAPER_FLAGS))
+    paper = {name: getattr(c2f_table3.Args(), name) for name in ca.TABLE3_DEFAULTS}
+    policy = ca.C2FPolicy(OBS, ACT, torch.randn(16, H * OBS), argparse.Namespace(history=H, hidden=8, **paper))
     with torch.no_grad():
         policy.head.weight.zero_()
         policy.head.bias.zero_()
         policy.head.weight[:, 8:] = zeta_weight * torch.eye(ACT)
     return policy.eval()
+
+
+def test_the_table3_defaults_filled_into_c2f_models_are_c2f_table3s_own():
+    """c2f.py's models record no ablation flag: they load as c2f_table3.py's model at these defaults."""
+    table3 = {field.name for field in dataclasses.fields(c2f_table3.Args)} - {field.name for field in dataclasses.fields(c2f.Args)}
+    assert set(ca.TABLE3_DEFAULTS) == table3
+    assert ca.TABLE3_DEFAULTS == {name: getattr(c2f_table3.Args(), name) for name in table3}
 
 
 @pytest.mark.parametrize("weight", [0.0, 1.0])
@@ -144,8 +155,8 @@ def test_zeta_intervention_on_a_c2f_model(demos, weight):
 
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory):
-    """Tiny models of the three methods and of the no-coarse control, saved by the real scripts' run() from
-    their command lines (in-process: four interpreter starts would cost more than the training)."""
+    """Tiny models of the three methods and of the no-coarse control (c2f_table3.py's), saved by the real scripts'
+    run() from their command lines (in-process: four interpreter starts would cost more than the training)."""
     workdir = link_experts(tmp_path_factory.mktemp("copycat"))
     budget = ["--epochs", "1", "--num-demo-samples", "300", "--eval-episodes", "1", "--seeds", "1", "--save-model"]
     cwd = os.getcwd()
@@ -154,7 +165,7 @@ def saved(tmp_path_factory):
         for method in ca.METHODS:
             script = importlib.import_module(method)
             script.run(tyro.cli(script.Args, args=[*budget, "--output-dir", f"models/{method}"]))
-        importlib.import_module("c2f").run(tyro.cli(importlib.import_module("c2f").Args, args=[*budget, "--no-coarse-action", "--output-dir", f"models/{ca.CONTROL}"]))
+        c2f_table3.run(tyro.cli(c2f_table3.Args, args=[*budget, "--no-coarse-action", "--output-dir", f"models/{ca.CONTROL}"]))
     finally:
         os.chdir(cwd)
     return workdir, {method: workdir / "models" / method / "seed1.pt" for method in (*ca.METHODS, ca.CONTROL)}
@@ -238,7 +249,7 @@ BAD_DEMOS = {
     "not found": (lambda tmp: tmp / "nowhere.npz", "nowhere.npz not found in "),
     "another rate": (lambda tmp: make_demos("Hopper-v4", 300, 1),
                      "was made at frame skip 1, not 4, the models' rate: pass --demos made at frame skip 4"),
-    "a non-finite value": (with_nan_at_row_17, "observations hold non-finite values at rows [17]: fix or drop them"),
+    "a non-finite value": (with_nan_at_row_17, "observations hold non-finite values at rows [17]: fix them"),
 }
 
 
@@ -252,7 +263,38 @@ def test_missing_model(saved, monkeypatch):
     message = bad_run(*saved, monkeypatch, bc_oh="nowhere/seed1.pt")
     assert "bc_oh model nowhere/seed1.pt not found" in message and "--save-model" in message
     message = bad_run(*saved, monkeypatch, control="nowhere/seed1.pt")
-    assert "c2f model nowhere/seed1.pt not found" in message and "--save-model --no-coarse-action`, or pass --control PATH" in message
+    train = "`python c2f_table3.py --env Hopper-v4 --seeds 1 --no-coarse-action --save-model --output-dir nowhere`"
+    assert "c2f model nowhere/seed1.pt not found" in message and f"{train}, or pass --control PATH" in message
+
+
+def test_c2f_models_of_either_file_load_with_the_table3_defaults(saved, tmp_path):
+    """c2f.py's model records no ablation flag; c2f_table3.py's model at its defaults records them all: both load
+    as C2F, with the same weights giving the same actions; a control must be a model trained without zeta."""
+    _, paths = saved
+    checkpoint = torch.load(paths["c2f"], weights_only=True)
+    assert checkpoint["method"] == "c2f" and not set(ca.TABLE3_DEFAULTS) & set(checkpoint["args"])
+    policy, args = ca.load_model(str(paths["c2f"]), "c2f", "Hopper-v4", 11, 3)
+    assert {name: args[name] for name in ca.TABLE3_DEFAULTS} == ca.TABLE3_DEFAULTS
+    checkpoint["method"], checkpoint["args"] = "c2f_table3", {**checkpoint["args"], **ca.TABLE3_DEFAULTS}
+    torch.save(checkpoint, tmp_path / "table3.pt")
+    same, _ = ca.load_model(str(tmp_path / "table3.pt"), "c2f", "Hopper-v4", 11, 3)
+    histories = torch.randn(5, 22)
+    torch.testing.assert_close(same(histories), policy(histories))
+    control = torch.load(paths[ca.CONTROL], weights_only=True)
+    assert control["method"] == "c2f_table3" and control["args"]["coarse_action"] is False
+    with pytest.raises(ca.UsageError, match="is a c2f model trained without --no-coarse-action"):
+        ca.load_model(str(paths["c2f"]), "c2f", "Hopper-v4", 11, 3, control=True)
+
+
+def test_a_model_trained_with_noise_on_other_entries_is_refused(saved, monkeypatch, tmp_path):
+    """Models of the old --velocity-dims recorded the entries their noise went to: others than the env's velocities
+    would be analysed with the wrong noise; None (the built-in table) loads."""
+    workdir, paths = saved
+    checkpoint = torch.load(paths["bc_oh"], weights_only=True)
+    checkpoint["args"]["velocity_dims"] = [0, 1]
+    torch.save(checkpoint, tmp_path / "other_dims.pt")
+    message = bad_run(workdir, paths, monkeypatch, bc_oh=tmp_path / "other_dims.pt")
+    assert "was trained with the noise on observation entries [0, 1], not on Hopper-v4's velocities [5, 6, 7, 8, 9, 10]" in message
 
 
 def test_history_that_does_not_match_the_models(saved, monkeypatch):

@@ -1,4 +1,4 @@
-"""benchmark.regimes and the runner's method variants (c2f_output = c2f.py --fusion output): which
+"""benchmark.regimes and the runner's method variants (c2f_output = c2f_table3.py --fusion output): which
 command runs, which settings a finished run must have, and the one-commit rule of a map."""
 import json
 import platform
@@ -20,7 +20,7 @@ def options(**overrides):
 def test_a_variant_runs_its_script_with_its_flags():
     run = run_grid.Run("c2f_output", "Hopper-v4", 1)
     command = run_grid.command(run, options())
-    assert command[1] == "c2f.py"
+    assert command[1] == "c2f_table3.py"
     assert command[command.index("--fusion") + 1] == "output" and command[-2:] == ["--frame-skip", "1"]
     wanted = run_grid.wanted_settings(run, options())
     assert (wanted["fusion"], wanted["frame_skip"], wanted["epochs"]) == ("output", 1, 1000)
@@ -117,9 +117,9 @@ def test_every_table3_row_is_a_named_variant_whose_command_c2f_accepts(variant):
     command = run_grid.command(run_grid.Run(variant, "Hopper-v4", 1), options(methods=[variant]))
     flags = command[command.index("--output-dir") + 2:-2]  # the variant's own flags, before --extra-args
     assert flags == as_flags(VARIANTS[variant][1]) and flags
-    import c2f, tyro
+    import c2f_table3, tyro
 
-    parsed = tyro.cli(c2f.Args, args=flags)
+    parsed = tyro.cli(c2f_table3.Args, args=flags)
     assert {name: getattr(parsed, name) for name in VARIANTS[variant][1]} == VARIANTS[variant][1]
 
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import bc_oh
-import c2f
+import c2f_table3
 from conftest import (assert_usage_error, fake_demos, link_experts, load_demos, make_demos, run_in_process, run_script,
                       tiny_args)
 
@@ -117,12 +117,12 @@ def test_the_copy_error_line_against_hand_computed_values(tmp_path, capsys):
         starts = np.arange(40) % 20 == 0
         np.savez(path, observations=np.zeros((40, 11)), actions=actions, episode_starts=starts)
         load_demos(bc_oh, demos=str(path))
-        return next(line for line in capsys.readouterr().out.splitlines() if line.startswith("demos:"))
+        return next(line for line in capsys.readouterr().out.splitlines() if "copy error" in line)
 
     alternating = np.repeat((np.arange(40) % 2 - (np.arange(40) >= 20))[:, None], 3, axis=1).astype(np.float32)
-    assert "copy error MSE(a_t-1, a_t)/Var(a) = 2.000 (near 0" in copy_error_line(alternating)
+    assert "copy error MSE(a_t-1, a_t)/Var(a) = 2.000 (0: copying" in copy_error_line(alternating)
     ramp = np.repeat((np.arange(40) / 39)[:, None], 3, axis=1).astype(np.float32)
-    assert "copy error MSE(a_t-1, a_t)/Var(a) = 0.008 (near 0" in copy_error_line(ramp)
+    assert "copy error MSE(a_t-1, a_t)/Var(a) = 0.008 (0: copying" in copy_error_line(ramp)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -135,7 +135,7 @@ def meta_of(path) -> dict:
 
 
 def reported_copy_error(out: str) -> float:
-    line = next(line for line in out.splitlines() if line.startswith("demos:"))
+    line = next(line for line in out.splitlines() if line.startswith("demos: copy error"))
     return float(line.split("copy error MSE(a_t-1, a_t)/Var(a) = ")[1].split()[0])
 
 
@@ -145,11 +145,11 @@ def test_demos_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(link_experts(tmp_path))
     fast, meta = load_demos(bc_oh, num_demo_samples=120, frame_skip=1)
     out = capsys.readouterr().out
-    assert "demos: 120 steps from demos/Hopper-v4_fs1_120.npz; " in out
+    assert "demos: 120 steps from demos/Hopper-v4_fs1_120.npz\n" in out
     assert meta["frame_skip"] == 1 and meta == meta_of(make_demos("Hopper-v4", 120, 1))
     native, meta = load_demos(bc_oh, num_demo_samples=120)
     native_out = capsys.readouterr().out
-    assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz; " in native_out
+    assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz\n" in native_out
     assert not np.array_equal(native["observations"], fast["observations"])
     assert 0 < reported_copy_error(out) < reported_copy_error(native_out)
 
@@ -174,7 +174,7 @@ def test_a_file_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
 @pytest.mark.parametrize("flags, message", [
     (["--frame-skip", 0], "--frame-skip must be positive, got 0: e.g. 1, or leave it out for the env's own"),
     (["--frame-skip", -2], "--frame-skip must be positive, got -2: "),
-    (["--env", "Pendulum-v1", "--frame-skip", 1], "env 'Pendulum-v1' is not a MuJoCo env: --frame-skip needs one, leave it out"),
+    (["--env", "Pendulum-v1", "--frame-skip", 1], "env 'Pendulum-v1' is not a MuJoCo env: leave --frame-skip out"),
 ], ids=["zero", "negative", "not-mujoco"])
 def test_make_demos_refuses_a_frame_skip_the_env_cannot_take(flags, message, tmp_path, monkeypatch):
     monkeypatch.chdir(link_experts(tmp_path, demos=False))
@@ -188,7 +188,7 @@ def test_demos_of_another_rate_are_refused(tmp_path):
     made = run_script("bc_oh.py", "--frame-skip", "1", "--num-demo-samples", 120, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
                       "--seeds", 1, "--output-dir", tmp_path / "out", cwd=tmp_path)
     assert made.returncode == 0, made.stderr
-    assert made.stdout.splitlines()[-1].endswith(" at its own frame skip 4"), "the expert's return is that of its own rate"
+    assert made.stdout.splitlines()[-1].startswith("Hopper-v4 bc_oh: "), made.stdout
     result = run_script("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1, cwd=tmp_path)
     assert_usage_error(result, "Hopper-v4_fs1_120.npz was made at frame skip 1, not 4: pass --frame-skip 1")
     summary = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
@@ -200,9 +200,13 @@ def test_demos_of_another_rate_are_refused(tmp_path):
 
 
 def c2f_policy(**options):
-    """The model c2f.py builds with these flags (Table3Policy off the paper's flags)."""
-    args = argparse.Namespace(history=2, hidden=32, **{**c2f.PAPER_FLAGS, **options})
-    return c2f.make_policy(args, 11, 3, torch.randn(50, 22))
+    """The model c2f_table3.py builds with these flags."""
+    flags = {name: getattr(c2f_table3.Args(), name) for name in TABLE3_FLAGS}
+    args = argparse.Namespace(history=2, hidden=32, **{**flags, **options})
+    return c2f_table3.make_policy(args, 11, 3, torch.randn(50, 22))
+
+
+TABLE3_FLAGS = ["fusion", "coarse_output", "coarse_input", "policy_input", "stop_gradient", "coarse_action", "two_stage"]
 
 
 def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():

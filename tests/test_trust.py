@@ -59,7 +59,7 @@ def test_actions_out_of_bounds_name_their_rows(tmp_path, monkeypatch):
     demos["actions"][7, 2], demos["actions"][150, 0] = 1.25, -1.5  # just outside [-1, 1], below and above
     save_demos(tmp_path / "one.npz", demos)
     result = run_in_process("bc_oh.py", "--demos", "one.npz", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "one.npz: actions of rows [7, 150] lie outside the bounds [-1, 1]: rescale them")
+    assert_usage_error(result, "one.npz: actions of rows [7, 150] lie outside [-1, 1]: rescale them")
 
 
 def test_a_users_unreadable_file_gets_no_advice_to_delete_or_unpickle_it(tmp_path, monkeypatch):
