@@ -109,13 +109,6 @@ class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
 
 
-# Copied from expert_ppo.require
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError unless condition holds."""
-    if not condition:
-        raise UsageError(message)
-
-
 # ----------------------------------------------------------------------------------------------
 # Env: the partially observed setting of the paper (noisy velocities)
 
@@ -213,8 +206,9 @@ class ExpertPolicy(nn.Module):
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
-    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
+    if not os.path.isfile(path):
+        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+        raise UsageError(f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy = ExpertPolicy(checkpoint)
@@ -222,8 +216,9 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     except Exception as error:
         problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
         raise UsageError(f"{problem}: re-copy or re-train it")
-    other = f"{path} is an expert for {trained_on}, not {env_id}"
-    require(trained_on == env_id, f"{other}: pass the one made for {env_id}")
+    if trained_on != env_id:
+        other = f"{path} is an expert for {trained_on}, not {env_id}"
+        raise UsageError(f"{other}: pass the one made for {env_id}")
     return policy.eval()
 
 

@@ -1,7 +1,6 @@
 # DAgger with an expert queried online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README
 """DAgger (Ross et al. 2011, section 3): BC-OH on the demonstrations (round 0), then rounds that
-roll out a beta-mix of the expert and the learner, label every visited state with the expert's
-action, add those states to the training data, and train on.
+roll out a beta-mix of expert and learner, aggregate the visited states the expert labels, train on.
 
 The learner sees the noisy observations and their history, as in bc_oh.py; the expert labels each
 state from the clean observation. The labels, 8000 in all ("DAgger 8K"), are split over the rounds.
@@ -147,8 +146,7 @@ def dagger_beta(round_number: int, beta_rounds: int) -> float:
 
 @torch.no_grad()
 def collect_round(policy, expert, args, num_labels: int, beta: float, rng, device) -> dict:
-    """num_labels steps of the beta-mix: the learner's noisy histories, the clean observations, the
-    expert's labels of them, and whether the expert acted."""
+    """num_labels steps of the beta-mix: the learner's inputs, the states, the expert's labels."""
     env = make_env(args.env, args.frame_skip)
     dims = velocity_dims(env, args.env)
     low = env.action_space.low
@@ -180,7 +178,6 @@ def collect_round(policy, expert, args, num_labels: int, beta: float, rng, devic
         data["expert_acted"].append(expert_acts)
         clean, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
-            # A new episode: its history starts afresh.
             clean, _ = env.reset()
             frames = None
     env.close()
@@ -195,9 +192,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     act_dim = env.action_space.shape[0]
     # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
-    noisy = partially_observe(
-        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
-    )
+    observations = demos["observations"]
+    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
@@ -215,13 +211,12 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     expert = load_expert(args.expert.format(env=args.env), args.env)
     rng = np.random.default_rng(seed)
     budget = split_budget(args.dagger_samples, args.dagger_rounds)
-    beta_rounds = args.dagger_beta_rounds or args.dagger_rounds
     rounds = []
 
     def aggregate(round_number):
         # Roll out the beta-mix, label its states, and add them to the data train_step samples.
         nonlocal inputs, targets
-        beta = dagger_beta(round_number, beta_rounds)
+        beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
         num_labels = budget[round_number - 1]
         policy.eval()
         data = collect_round(policy, expert, args, num_labels, beta, rng, device)
@@ -257,7 +252,6 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     start = time.time()
     for epoch in range(1, epochs + 1):
         if epoch > round_end:
-            # The next round: roll out, label and aggregate, then train on the aggregate.
             round_number += 1
             round_end += args.dagger_epochs
             round_start = step
@@ -266,7 +260,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             total_steps = args.dagger_epochs * steps_per_epoch
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            # The learning rate decays linearly to 0 (section 8.3), restarting each round.
+            # The learning rate decays linearly to 0 (section 8.3).
             for group in optimizer.param_groups:
                 group["lr"] = args.learning_rate * (1 - (step - round_start) / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
@@ -278,12 +272,14 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
         evaluating = epoch % args.eval_every == 0 or epoch == round_end
         if evaluating:
             policy.eval()
-            # The final learner is evaluated 3 times, on other episodes: its score is their mean.
-            repeats = 3 if epoch == epochs else 1
-            for repeat in range(repeats):
-                episodes_seed = 10_000 * seed + epoch + repeat * args.eval_episodes
-                returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
-                evaluations.append((epoch, float(np.mean(returns))))
+            returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
+            evaluations.append((epoch, float(np.mean(returns))))
+            # The final learner is evaluated twice more, on other episodes: its score is their mean.
+            if epoch == epochs:
+                for repeat in (1, 2):
+                    episodes_seed = 10_000 * seed + epoch + repeat * args.eval_episodes
+                    returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
+                    evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
         if evaluating or epoch % max(1, epochs // 20) == 0:
             last_return = "n/a"
@@ -509,13 +505,6 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 
 # ---- The expert, queried online: expert_ppo.py's deterministic policy ----
-# Copied from expert_ppo.require
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError unless condition holds."""
-    if not condition:
-        raise UsageError(message)
-
-
 # Copied from expert_ppo.ExpertPolicy
 class ExpertPolicy(nn.Module):
     """The deterministic expert: frozen obs normalisation, the actor's mean action, clipped."""
@@ -542,8 +531,9 @@ class ExpertPolicy(nn.Module):
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
-    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
+    if not os.path.isfile(path):
+        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+        raise UsageError(f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy = ExpertPolicy(checkpoint)
@@ -551,8 +541,9 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     except Exception as error:
         problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
         raise UsageError(f"{problem}: re-copy or re-train it")
-    other = f"{path} is an expert for {trained_on}, not {env_id}"
-    require(trained_on == env_id, f"{other}: pass the one made for {env_id}")
+    if trained_on != env_id:
+        other = f"{path} is an expert for {trained_on}, not {env_id}"
+        raise UsageError(f"{other}: pass the one made for {env_id}")
     return policy.eval()
 
 

@@ -5,8 +5,6 @@ Train:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:   python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
 Evaluate: python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
 Demos:    python expert_ppo.py --env Hopper-v4 --make-demos   (the imitation files' input)
-
-A checkpoint is a dict of tensors and numbers (experts/README.md).
 """
 
 import hashlib
@@ -26,16 +24,16 @@ import torch
 import torch.nn as nn
 import tyro
 
-# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
-gym.logger.min_level = gym.logger.ERROR
 
-
+# Copied from bc_oh.print_mujoco_warning
 def print_mujoco_warning(text: str):
-    # MuJoCo 3.x warns about gymnasium's HalfCheetah XML each time it is made: drop that one.
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah model each time it is made: skip that one.
     if "settotalmass" not in text:
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
 
@@ -229,8 +227,9 @@ class ExpertPolicy(nn.Module):
 
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
-    train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-    require(os.path.isfile(path), f"expert checkpoint {path} not found: {train}")
+    if not os.path.isfile(path):
+        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+        raise UsageError(f"expert checkpoint {path} not found: {train}")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy = ExpertPolicy(checkpoint)
@@ -238,8 +237,9 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
     except Exception as error:
         problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
         raise UsageError(f"{problem}: re-copy or re-train it")
-    other = f"{path} is an expert for {trained_on}, not {env_id}"
-    require(trained_on == env_id, f"{other}: pass the one made for {env_id}")
+    if trained_on != env_id:
+        other = f"{path} is an expert for {trained_on}, not {env_id}"
+        raise UsageError(f"{other}: pass the one made for {env_id}")
     return policy.eval()
 
 
@@ -325,10 +325,8 @@ def retargeted_expert(path: str, env_id: str):
 def eval_only(args: Args):
     path = args.checkpoint.format(env=args.env)
     native = env_frame_skip(args.env)
-    if args.frame_skip is not None:
-        env_frame_skip(args.env, args.frame_skip)
+    env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
-    # An expert for another version of --env (Hopper-v4 for Hopper-v5) needs --retarget.
     recorded = checkpoint_env(path)
     same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
     other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
@@ -346,7 +344,6 @@ def eval_only(args: Args):
     there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
     fix = f"drop --frame-skip {frame_skip} or --ship-to"
     require(not args.ship_to or frame_skip == trained_at, f"{there}, {fix}")
-    # Said only at another rate, so that the default output stays as it was.
     if frame_skip != native:
         rates = f"the env's own is {native}; the expert was trained at {trained_at}"
         print(f"evaluating at frame skip {frame_skip} ({rates})")
@@ -406,7 +403,6 @@ def make_demos(args: Args):
     """Roll the expert out into demos/, unless a file of the same expert and settings is there."""
     native = env_frame_skip(args.env)
     frame_skip = env_frame_skip(args.env, args.frame_skip)
-    # The paper's sample counts: 20000 for Hopper, 10000 for the other envs.
     num_samples = args.num_demo_samples
     if num_samples is None:
         num_samples = 20000 if args.env.startswith("Hopper") else 10000
@@ -579,7 +575,6 @@ def train(args: Args):
     next_eval = global_step + args.eval_every_steps
 
     while global_step < args.total_timesteps:
-        # Anneal the learning rate linearly to zero.
         frac = max(1.0 - global_step / args.total_timesteps, 0.0)
         optimizer.param_groups[0]["lr"] = args.learning_rate * frac
 
@@ -593,7 +588,6 @@ def train(args: Args):
                 raw_obs, reward, terminated, truncated, info = envs.step(clipped_action)
                 global_step += args.num_envs
                 episode_return += reward
-                # Scale rewards by the std of the discounted return.
                 discounted_return = discounted_return * args.gamma + reward
                 ret_rms.update(discounted_return)
                 scaled_reward = np.clip(reward / np.sqrt(ret_rms.var + 1e-8), -10, 10)
@@ -671,7 +665,6 @@ def train(args: Args):
         if global_step >= next_save:
             next_save += args.save_every_steps
             save_atomically(checkpoint(), latest_path)
-        # --max-minutes: stop cleanly; the same command with --resume goes on.
         over_time = elapsed > args.max_minutes * 60
         if args.max_minutes and over_time and global_step < args.total_timesteps:
             break

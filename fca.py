@@ -94,7 +94,7 @@ class UsageError(Exception):
 
 
 # ---- The method: FCA's networks G, F and D, their losses and the training loop ----
-def head(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
+def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The authors' F and D: one hidden layer, each Linear after a LeakyReLU(0.2)."""
     layers = [nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2)]
     return nn.Sequential(*layers, nn.Linear(hidden, out_dim))
@@ -126,9 +126,9 @@ class Policy(nn.Module):
             linear = nn.Linear(in_dim, hidden, bias=i > 0)
             blocks += [linear, nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2)]
         self.encoder = nn.Sequential(*blocks, nn.Linear(hidden, embedding_dim))
-        self.head = head(embedding_dim, act_dim, hidden)
+        self.head = mlp(embedding_dim, act_dim, hidden)
         # D is conditioned on the true a_t: it removes only what a_t does not already explain.
-        self.adversary = head(embedding_dim + act_dim, act_dim, hidden)
+        self.adversary = mlp(embedding_dim + act_dim, act_dim, hidden)
         # The authors' weights_init: Xavier-uniform Linear weights, BatchNorm scales drawn from
         # N(1, 0.02^2), zero biases.
         for module in self.modules():
@@ -208,7 +208,7 @@ def authors_setting(env_id: str, weight: float | None, lr_ratio: float | None) -
     return weight, lr_ratio
 
 
-def train_seed(args, demos: dict, seed: int, device) -> dict:
+def train_seed(args, demos: dict, seed: int, device) -> tuple:
     """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
     torch.manual_seed(seed)
     env = make_env(args.env)
@@ -216,9 +216,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     act_dim = env.action_space.shape[0]
     # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
-    noisy = partially_observe(
-        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
-    )
+    observations = demos["observations"]
+    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
