@@ -35,6 +35,7 @@ import torch.nn as nn
 import tyro
 
 METHOD = "c2f_table3"
+LOSS = "Eq. 2, or the one term --two-stage or --no-coarse-action trains"
 
 
 @dataclass
@@ -432,11 +433,10 @@ def load_demos(args, env: gym.Env) -> tuple:
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
     # The paper's demo sizes (section 5.1): 20k steps for Hopper, 10k for the others.
-    n = args.num_demo_samples
-    if n is None:
-        n = 10000
-        if args.env.startswith("Hopper"):
-            n = 20000
+    paper_n = 10000
+    if args.env.startswith("Hopper"):
+        paper_n = 20000
+    n = args.num_demo_samples or paper_n
     path = args.demos
     if path is None and args.frame_skip == native:
         path = f"demos/{args.env}_{n}.npz"
@@ -445,8 +445,12 @@ def load_demos(args, env: gym.Env) -> tuple:
     if not os.path.isfile(path):
         make = f"python expert_ppo.py --env {args.env} --frame-skip {args.frame_skip}"
         make += f" --num-demo-samples {n} --make-demos"
-        where = f"demo file {path} not found in {os.getcwd()}"
-        raise UsageError(f"{where}: check --demos, or make it: {make}")
+        fix = f"check --demos, or make it: {make}"
+        # Fewer steps at the env's own rate: the first steps of the paper's file will do.
+        if args.demos is None and args.frame_skip == native and n < paper_n:
+            shipped = f"demos/{args.env}_{paper_n}.npz"
+            fix += f", or the shipped file's first steps: --demos {shipped} --num-demo-samples {n}"
+        raise UsageError(f"demo file {path} not found in {os.getcwd()}: {fix}")
     demos = {}
     meta = {}
     try:
@@ -600,6 +604,7 @@ def run(args):
     workers = min(args.workers or os.cpu_count(), len(args.seeds))
     if args.cuda:
         workers = 1
+    print(f"progress lines: loss = {LOSS}; last eval = the mean return of the latest evaluation")
     jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
     try:
         if workers == 1:

@@ -136,6 +136,29 @@ def test_a_demo_file_that_does_not_fit_is_told_what_is_wrong(tmp_path, case, mes
     assert_usage_error(run_in_process("bc_oh.py", "--demos", path, "--epochs", 1), message)
 
 
+def test_missing_demos_of_fewer_steps_name_the_shipped_file_too(tmp_path, monkeypatch):
+    """At the env's own rate, fewer steps than the paper's: the first steps of the shipped file will do."""
+    monkeypatch.chdir(tmp_path)
+    assert_usage_error(run_in_process("bc_oh.py", "--num-demo-samples", 500),
+                       "--num-demo-samples 500 --make-demos, or the shipped file's first steps: "
+                       "--demos demos/Hopper-v4_20000.npz --num-demo-samples 500")
+
+
+def test_the_progress_lines_say_what_their_numbers_are(tmp_path, monkeypatch, capsys):
+    """Before training, one line names the loss each file prints (C2F's is Eq. 2) and the evaluation; the table's
+    header names the score."""
+    import c2f
+
+    for module, loss in ((bc_oh, "MSE to the expert's actions"), (c2f, "Eq. 2, MSE(zeta, a_t) + MSE(final action, a_t)")):
+        path = tmp_path / f"{module.METHOD}.npz"
+        np.savez(path, **fake_demos(256))
+        skip_evaluation(monkeypatch, module, 4.0)
+        module.run(tiny_args(module, demos=str(path), output_dir=str(tmp_path / module.METHOD)))
+        out = capsys.readouterr().out.splitlines()
+        assert f"progress lines: loss = {loss}; last eval = the mean return of the latest evaluation" in out
+        assert "  seed | score (mean return of the last 3 evaluations)" in out
+
+
 def test_missing_demos_name_the_command_that_makes_them(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert_usage_error(run_in_process("bc_oh.py", "--frame-skip", 1, "--num-demo-samples", 500),
