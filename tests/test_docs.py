@@ -1,6 +1,6 @@
 """The README and the pages under docs/: every relative link resolves (file and #anchor), every page is linked from
-the README, the README stays short, and the capacity test's declaration stays word for word what was committed
-before its runs."""
+the README, the README stays short and its first screen answers a newcomer, and the capacity test's declaration stays
+word for word what was committed before its runs."""
 import hashlib
 import re
 import unicodedata
@@ -10,7 +10,13 @@ from conftest import REPO_ROOT
 
 README = REPO_ROOT / "README.md"
 PAGES = [README, *sorted((REPO_ROOT / "docs").glob("*.md")), REPO_ROOT / "experts" / "README.md"]
-MOST_README_LINES = 260
+MOST_README_LINES = 200
+FIRST_SCREEN_LINES = 60
+MOST_FIRST_SCREEN_WORDS = 460
+"""the README's first 60 lines: about 450 words (counted as `wc -w` does, code blocks and tables included)"""
+MOST_PARAGRAPH_WORDS = 85
+INSTALL = ("python3 -m venv .venv && . .venv/bin/activate && pip install torch==2.13.0 "
+           "--index-url https://download.pytorch.org/whl/cpu\npip install -r requirements.txt\n")
 
 LINK = re.compile(r"!?\[(?:[^\]\[]|\[[^\]]*\])*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 """[text](target) and ![alt](target); the text may hold one level of [brackets]"""
@@ -89,7 +95,23 @@ def test_the_readme_is_short_and_links_every_page_and_the_license():
     linked = {(REPO_ROOT / target.partition("#")[0]).resolve() for target in relative_links(README)}
     assert set(PAGES[1:]) <= linked, "every page is linked from the README"
     assert (REPO_ROOT / "LICENSE").resolve() in linked and (REPO_ROOT / "LICENSE").read_text().startswith("MIT License")
-    assert lines.index("## Results in brief") < 40, "the results in brief come on the first screen, after the two commands"
+
+
+def test_the_readme_first_screen_answers_a_newcomer():
+    """The first 60 lines say how to install, check, run and test, how long each takes, and whether C2F works, in
+    about 450 words: the install block alone (it does not start the main job), no paragraph over about 80 words."""
+    screen = "\n".join(README.read_text().splitlines()[:FIRST_SCREEN_LINES]) + "\n"
+    words = len(screen.split())
+    assert words <= MOST_FIRST_SCREEN_WORDS, f"the README's first {FIRST_SCREEN_LINES} lines hold {words} words"
+    assert f"```bash\n{INSTALL}```\n" in screen, "the install block, alone, on the first screen"
+    for needed in ["## Does C2F work?", "python c2f.py --env Hopper-v4 --seeds 1 --epochs 30\n",
+                   "python c2f.py --env Hopper-v4\n", "python -m pytest\n", "| BC-SO", "| BC-OH", "| C2F"]:
+        assert needed in screen, f"the first screen lacks {needed!r}"
+    assert screen.index("## Does C2F work?") > screen.index("python -m pytest"), "install, check, run and test come first"
+    for paragraph in re.sub(r"^```.*?^```[^\n]*$", "", screen, flags=re.M | re.S).split("\n\n"):
+        if not paragraph.lstrip().startswith("|"):
+            for item in re.split(r"\n(?=- )", paragraph):
+                assert len(item.split()) <= MOST_PARAGRAPH_WORDS, f"a paragraph over about 80 words: {item[:60]!r}"
 
 
 DECLARATIONS = {
