@@ -375,7 +375,7 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
     family = env_id.split("-")[0]
     if family not in V4_VELOCITIES:
-        raise UsageError(f"the velocity entries of {env_id} are unknown: use a v5 env")
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use a MuJoCo v4 or v5 env")
     start, end = V4_VELOCITIES[family]
     return list(range(start, end))
 
