@@ -113,10 +113,6 @@ class UsageError(Exception):
 # Env: the partially observed setting of the paper (noisy velocities)
 
 
-V4_VELOCITIES = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
-"""the velocity entries [start, end) of the v4 envs' observations (bc_oh.py's table)"""
-
-
 # Copied from bc_oh.velocity_dims
 def velocity_dims(env: gym.Env, env_id: str) -> list:
     """The indices of the joint velocities in an observation: where the noise goes."""
@@ -124,10 +120,12 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     if structure:
         # v5 envs describe their layout: positions first, then the qvel block.
         return list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
+    # The v4 envs: the velocity entries [start, end) of their observations.
+    known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
-    if family not in V4_VELOCITIES:
+    if family not in known:
         raise UsageError(f"the velocity entries of {env_id} are unknown: use a MuJoCo v4 or v5 env")
-    start, end = V4_VELOCITIES[family]
+    start, end = known[family]
     return list(range(start, end))
 
 
@@ -333,7 +331,9 @@ def load_demos(args, env: gym.Env) -> tuple:
         steps = len(obs)
         raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
-        raise UsageError(f"{path}: {take} steps are not more than a batch: use a smaller one")
+        raise UsageError(
+            f"{path}: {take} steps, not more than a batch: pass a smaller --batch-size"
+        )
     obs = obs[:take]
     actions = actions[:take]
     starts = starts[:take]
