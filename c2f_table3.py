@@ -235,7 +235,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
+    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx, stage=None):
         zeta, final = policy.coarse_and_final(inputs[idx])
@@ -315,8 +316,7 @@ def fit(
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
-    dims = velocity_dims(make_env(args.env), args.env)
-    env_fns = [functools.partial(make_sensor_env, args, dims, seed + i) for i in range(episodes)]
+    env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
     low = envs.single_action_space.low
@@ -397,8 +397,10 @@ class PartialObservation(gym.ObservationWrapper):
         return obs
 
 
-def make_sensor_env(args, dims: list, seed: int) -> gym.Env:
+def make_sensor_env(args, seed: int) -> gym.Env:
+    """The env at --frame-skip, seen through the sensor of --obs-noise-std or --hide-velocities."""
     env = make_env(args.env, args.frame_skip)
+    dims = velocity_dims(env, args.env)
     return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
 
 

@@ -235,7 +235,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # One Adam with the authors' betas; D is a parameter group of its own, at its own rate.
     g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]
     groups = [{"params": g_and_f}, {"params": policy.adversary.parameters(), "lr": d_rate}]
-    optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999))
+    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999), fused=True)
 
     def train_step(idx):
         # The authors' alternating updates: first D, then G and F (no gradient reversal).
@@ -299,8 +300,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
-    dims = velocity_dims(make_env(args.env), args.env)
-    env_fns = [functools.partial(make_sensor_env, args, dims, seed + i) for i in range(episodes)]
+    env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
     low = envs.single_action_space.low
@@ -381,8 +381,10 @@ class PartialObservation(gym.ObservationWrapper):
         return obs
 
 
-def make_sensor_env(args, dims: list, seed: int) -> gym.Env:
+def make_sensor_env(args, seed: int) -> gym.Env:
+    """The env at --frame-skip, seen through the sensor of --obs-noise-std or --hide-velocities."""
     env = make_env(args.env, args.frame_skip)
+    dims = velocity_dims(env, args.env)
     return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
 
 

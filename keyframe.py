@@ -156,7 +156,7 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
     # The authors' model: one hidden layer of 300 and LeakyReLU(0.2), trained by Adam at lr 1e-3.
     layers = [nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])]
     model = nn.Sequential(*layers).to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3, fused=True)
     for _ in range(epochs * max(1, len(inputs) // batch_size)):
         idx = torch.randint(len(inputs), (batch_size,), device=device)
         optimizer.zero_grad()
@@ -224,7 +224,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     found += f" (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
     print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {found}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate)
+    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
         if args.weighting == "threshold":
@@ -287,8 +288,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
     """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
-    dims = velocity_dims(make_env(args.env), args.env)
-    env_fns = [functools.partial(make_sensor_env, args, dims, seed + i) for i in range(episodes)]
+    env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
     low = envs.single_action_space.low
@@ -369,8 +369,10 @@ class PartialObservation(gym.ObservationWrapper):
         return obs
 
 
-def make_sensor_env(args, dims: list, seed: int) -> gym.Env:
+def make_sensor_env(args, seed: int) -> gym.Env:
+    """The env at --frame-skip, seen through the sensor of --obs-noise-std or --hide-velocities."""
     env = make_env(args.env, args.frame_skip)
+    dims = velocity_dims(env, args.env)
     return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
 
 

@@ -1,0 +1,59 @@
+"""What the speed benchmarks share: a method script as an older commit had it, and one timed run of a command.
+
+    from benchmark.baseline import BEFORE_FUSED_ADAM, script_at, timed_run
+    path = script_at("8ce2c69", "c2f", folder)   # folder/8ce2c69/c2f.py, written from `git show`
+    seconds = timed_run([sys.executable, str(path), ...])
+
+A method file imports nothing from this repository, so its old text runs as it ran then. It runs from the
+repository's root, where it finds demos/ and experts/ as the new one does.
+"""
+
+import os
+import subprocess
+import time
+from pathlib import Path
+
+from benchmark.machine import describe, machine
+from benchmark.results import UsageError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+BEFORE_FUSED_ADAM = "8ce2c69"
+"""the last commit before issue 56 (fused Adam, sensor envs built once): the benchmarks' default baseline"""
+
+
+def script_at(commit: str, script: str, folder: Path) -> Path:
+    """Write `script`.py as it was at `commit` into folder/<commit>/ and return its path; "HEAD" is
+    the working tree's file itself, uncommitted changes included."""
+    if commit == "HEAD":
+        return REPO_ROOT / f"{script}.py"
+    shown = subprocess.run(
+        ["git", "show", f"{commit}:{script}.py"], cwd=REPO_ROOT, capture_output=True, text=True
+    )
+    if shown.returncode != 0:
+        raise UsageError(
+            f"git cannot show {script}.py at {commit!r}: give a commit of this repository"
+        )
+    path = folder / commit / f"{script}.py"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(shown.stdout)
+    return path
+
+
+def timed_run(command: list) -> float:
+    """Run the command from the repository's root; the seconds it took. A failed run is refused with its
+    last line of stderr."""
+    start = time.perf_counter()
+    finished = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if finished.returncode != 0:
+        last_line = finished.stderr.strip().splitlines()[-1:]
+        raise UsageError(f"{' '.join(map(str, command[1:]))} failed: {last_line}")
+    return seconds
+
+
+def machine_line() -> str:
+    """The machine a timing was made on, in one line: CPU, its family and model, cores, torch."""
+    record = machine()
+    cores = len(os.sched_getaffinity(0))
+    family = f"CPU family {record['cpu_family']}, model {record['cpu_model']}"
+    return f"{describe(record)}, {family}, {cores} cores, torch {record['torch']}"
