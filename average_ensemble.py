@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "average_ensemble"
@@ -181,7 +182,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         # Behavioural cloning for each member: the mean squared error to the expert's actions.
         losses = {}
         for name, member in policy.members.items():
-            losses[name] = ((member(inputs[idx]) - targets[idx]) ** 2).mean()
+            losses[name] = F.mse_loss(member(inputs[idx]), targets[idx])
         optimizer.zero_grad()
         # The members share no parameter and Adam steps each parameter alone: each member trains
         # as its own script trains it, on the same minibatches.

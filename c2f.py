@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f"
@@ -118,8 +119,9 @@ class Policy(nn.Module):
 
     def coarse_and_final(self, obs_history):
         """zeta and the final action: the two outputs that Eq. 2 trains."""
-        zeta = self.coarse(self.normalize(obs_history)[:, -self.obs_dim :])
-        feature = self.policy_rest(self.policy_first(self.normalize(obs_history)))
+        normalized = self.normalize(obs_history)
+        zeta = self.coarse(normalized[:, -self.obs_dim :])
+        feature = self.policy_rest(self.policy_first(normalized))
         # detach() is the stop-gradient sg: the final action's loss does not train the coarse model.
         final = self.head(torch.cat([feature, zeta.detach()], dim=1))
         return zeta, final
@@ -164,8 +166,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     def train_step(idx):
         # Eq. 2: the final action's and zeta's mean squared errors to the expert's actions, summed.
         zeta, final = policy.coarse_and_final(inputs[idx])
-        final_loss = ((final - targets[idx]) ** 2).mean()
-        coarse_loss = ((zeta - targets[idx]) ** 2).mean()
+        actions = targets[idx]
+        final_loss = F.mse_loss(final, actions)
+        coarse_loss = F.mse_loss(zeta, actions)
         loss = final_loss + coarse_loss
         optimizer.zero_grad()
         loss.backward()

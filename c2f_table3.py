@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f_table3"
@@ -240,8 +241,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
     def train_step(idx, stage=None):
         zeta, final = policy.coarse_and_final(inputs[idx])
-        final_loss = ((final - targets[idx]) ** 2).mean()
-        coarse_loss = ((zeta - targets[idx]) ** 2).mean()
+        final_loss = F.mse_loss(final, targets[idx])
+        coarse_loss = F.mse_loss(zeta, targets[idx])
         if stage == "coarse":
             # Two-stage training, stage 1: the coarse model alone, on its own loss.
             loss = coarse_loss

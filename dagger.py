@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "dagger"
@@ -204,7 +205,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
     def train_step(idx):
         # Behavioural cloning: the mean squared error to the expert's actions of a minibatch.
-        loss = ((policy(inputs[idx]) - targets[idx]) ** 2).mean()
+        loss = F.mse_loss(policy(inputs[idx]), targets[idx])
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()

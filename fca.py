@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "fca"
@@ -174,7 +175,7 @@ def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndar
 def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> torch.Tensor:
     """One step of D on MSE(D(e, a_t), a_{t-1}), with e held fixed; D's loss before the step."""
     prediction = policy.predict_previous_action(embedding.detach(), actions)
-    loss = ((prediction - previous) ** 2).mean()
+    loss = F.mse_loss(prediction, previous)
     optimizer.zero_grad()
     loss.backward()
     # e is detached, so only D has gradients, and the optimizer moves only D.
@@ -184,9 +185,9 @@ def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> t
 
 def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):
     """One step of G and F on MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}); both losses."""
-    bc_loss = ((policy.head(embedding) - actions) ** 2).mean()
+    bc_loss = F.mse_loss(policy.head(embedding), actions)
     prediction = policy.predict_previous_action(embedding, actions)
-    adversary_loss = ((prediction - previous) ** 2).mean()
+    adversary_loss = F.mse_loss(prediction, previous)
     optimizer.zero_grad()
     # Fit a_t while making a_{t-1} hard to predict for the current D.
     (bc_loss - weight * adversary_loss).backward()
@@ -225,7 +226,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # D's targets, the previous actions, and its error if it predicted a_{t-1} = a_t.
     previous = previous_actions(demos["actions"], demos["episode_starts"])
     previous = torch.as_tensor(previous, dtype=torch.float32, device=device)
-    reference = ((previous - targets) ** 2).mean().item()
+    reference = F.mse_loss(previous, targets).item()
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     weight, lr_ratio = authors_setting(args.env, args.adversary_weight, args.adversary_lr_ratio)
     d_rate = lr_ratio * args.learning_rate

@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
+import torch.nn.functional as F
 import tyro
 
 METHOD = "keyframe"
@@ -160,7 +161,7 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
     for _ in range(epochs * max(1, len(inputs) // batch_size)):
         idx = torch.randint(len(inputs), (batch_size,), device=device)
         optimizer.zero_grad()
-        loss = ((model(inputs[idx]) - targets[idx]) ** 2).mean()
+        loss = F.mse_loss(model(inputs[idx]), targets[idx])
         loss.backward()
         optimizer.step()
     # The squared error of each sample, summed over the action's entries.

@@ -1,64 +1,71 @@
-"""Time a whole three-seed job of a method script with each --workers count (seeds in parallel processes).
+"""Time the main job (three seeds of a method script) against an older commit's, and with each --workers count.
 
-    python -m benchmark.main_job_time [--script c2f] [--epochs N] [--workers 1 2 3]
+    python -m benchmark.main_job_time [--script c2f] [--epochs 100] [--baseline 8ce2c69] [--workers 2 3] [--repeats 2]
 
-Each count runs `python <script>.py --env Hopper-v4 --seeds 1 2 3 --workers W --epochs N` (paper settings
-otherwise) in a fresh output folder, demos generated once beforehand so that no run pays for them, and
-prints a Markdown table of wall times (the whole command: start-up, training, evaluations) with the machine.
+Each run is the whole command `python <script>.py --env Hopper-v4 --seeds 1 2 3 --workers W --epochs N`
+(paper settings otherwise: start-up, demos loaded, training, ten evaluations, result files) in a fresh output
+folder, from the repository's root. The baseline is `git show <baseline>:<script>.py` with --workers set to
+the cores (its default then); the new file runs with each count of --workers. The runs alternate (baseline,
+then each count of the new file, then again) so that a change in the machine's load reaches all of them.
+Prints the machine and a Markdown table of wall times, each against the baseline's median.
 """
+
 import os
-import platform
-import subprocess
+import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from benchmark.machine import cpuinfo_field
+from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at, timed_run
 from benchmark.results import OneLineParser, UsageError, run_cli
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
 SEEDS = ["1", "2", "3"]
 
 
-def job(script: str, epochs: int, workers: int, workdir: Path) -> list:
-    return [sys.executable, str(REPO_ROOT / f"{script}.py"), "--env", "Hopper-v4", "--seeds", *SEEDS, "--workers", str(workers),
-            "--epochs", str(epochs), "--output-dir", str(workdir / f"out_{workers}")]
-
-
-def wall_time(command: list) -> float:
-    start = time.time()
-    finished = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True)
-    if finished.returncode != 0:
-        raise UsageError(f"{' '.join(command[1:])} failed: {finished.stderr.strip().splitlines()[-1:]}")
-    return time.time() - start
-
-
-def cpu_name() -> str:
-    return cpuinfo_field("model name") or platform.processor() or platform.machine()
+def job(script_path: Path, epochs: int, workers: int, out: Path) -> list:
+    command = [sys.executable, str(script_path), "--env", "Hopper-v4", "--seeds", *SEEDS]
+    command += ["--workers", str(workers), "--epochs", str(epochs), "--output-dir", str(out)]
+    return command
 
 
 def main(argv=None) -> int:
-    parser = OneLineParser(prog="python -m benchmark.main_job_time", description=__doc__.splitlines()[0])
+    cores = len(os.sched_getaffinity(0))
+    parser = OneLineParser(
+        prog="python -m benchmark.main_job_time", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("--script", default="c2f")
-    parser.add_argument("--epochs", type=int, default=1000)
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--epochs", type=int, default=100)
+    parser.add_argument("--baseline", default=BEFORE_FUSED_ADAM, help="the commit to compare with")
+    parser.add_argument("--workers", type=int, nargs="+", default=sorted({cores, len(SEEDS)}))
+    parser.add_argument("--repeats", type=int, default=2, help="runs of each setting, alternating")
     options = parser.parse_args(argv)
     if not (REPO_ROOT / f"{options.script}.py").is_file():
-        raise UsageError(f"unknown script {options.script}.py")
-    if options.epochs <= 0 or min(options.workers) <= 0:
-        raise UsageError("--epochs and --workers must be positive")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        raise UsageError(f"unknown script {options.script}.py: name a method file, e.g. c2f")
+    if options.epochs <= 0 or options.repeats <= 0 or min(options.workers) <= 0:
+        raise UsageError("--epochs, --repeats and --workers must be positive")
+    settings = [(options.baseline, cores)]
+    for workers in options.workers:
+        settings.append(("HEAD", workers))
+    times = {}
     with tempfile.TemporaryDirectory() as tmp:
-        # one short seed first: it caches the demos under demos/ (as any run does), so no timed run generates them
-        wall_time([*job(options.script, 1, 1, Path(tmp))[:5], "1", "--epochs", "1", "--output-dir", str(Path(tmp) / "warm-up")])
-        times = {workers: wall_time(job(options.script, options.epochs, workers, Path(tmp))) for workers in options.workers}
-    print(f"machine: {cpu_name()}, {cores} cores; {options.script}.py, Hopper-v4, "
-          f"seeds {' '.join(SEEDS)}, {options.epochs} epochs")
-    print("| --workers | wall time (s) | vs --workers 1 |" if 1 in times else "| --workers | wall time (s) |")
-    print("|---|---|---|" if 1 in times else "|---|---|")
-    for workers, seconds in times.items():
-        print(f"| {workers} | {seconds:.1f} |" + (f" {times[1] / seconds:.2f}x |" if 1 in times else ""))
+        for repeat in range(options.repeats):
+            for version, workers in settings:
+                path = script_at(version, options.script, Path(tmp))
+                out = Path(tmp, f"out_{version}_{workers}_{repeat}")
+                seconds = timed_run(job(path, options.epochs, workers, out))
+                times.setdefault((version, workers), []).append(seconds)
+                print(f"{version}, --workers {workers}: {seconds:.1f} s", file=sys.stderr)
+    baseline = statistics.median(times[settings[0]])
+    print(f"machine: {machine_line()}")
+    print(
+        f"{options.script}.py --env Hopper-v4 --seeds {' '.join(SEEDS)} --epochs {options.epochs}"
+    )
+    print(f"| code | --workers | wall time (s), each run | median | vs {options.baseline} |")
+    print("|---|---:|---:|---:|---:|")
+    for (version, workers), seconds in times.items():
+        runs = ", ".join(f"{value:.1f}" for value in seconds)
+        median = statistics.median(seconds)
+        print(f"| {version} | {workers} | {runs} | {median:.1f} | {median / baseline:.2f}x |")
     return 0
 
 
