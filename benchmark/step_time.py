@@ -1,33 +1,45 @@
 """Time the training step of method scripts against an older commit's, side by side in one run.
 
-    python -m benchmark.step_time [--scripts bc_oh c2f fca] [--baseline 8ce2c69] [--epochs 20] [--repeats 2]
+    python -m benchmark.step_time [--scripts bc_oh c2f fca] [--baseline 8ce2c69] [--epochs 20] [--repeats 3]
 
 Each run is the real script on Hopper-v4 (paper settings but --epochs, one seed, one evaluation of one
 episode); its `ms_per_step` is read from its JSON result: the script's own training-loop time per step,
 evaluations excluded, first epoch included, on one thread. The baseline's file is `git show
-<baseline>:<script>.py`, run from the repository's root. The runs alternate (baseline, new, baseline, new)
-so that a change in the machine's load reaches both. Prints the machine and a Markdown table: each run's
-figure, and the ratio of the medians (new / baseline; below 1 is faster).
+<baseline>:<script>.py`, run from the repository's root. The two versions of a script run at the same
+time, one process each, so that whatever else loads the machine reaches both alike (on a shared cloud
+machine the step time drifts by a third within minutes); each such pair gives a ratio. Prints the
+machine and a Markdown table: each run's figure, and the median of the pairs' ratios (new / baseline;
+below 1 is faster).
 """
 
 import json
 import statistics
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at, timed_run
+from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at
 from benchmark.results import OneLineParser, UsageError, run_cli
 
 
-def step_time(script_path: Path, epochs: int, out: Path, cuda: bool) -> float:
-    """ms per training step of one run of the script."""
+def start(script_path: Path, epochs: int, out: Path, cuda: bool) -> subprocess.Popen:
+    """Start one run of the script; its result goes to out/result_seeds1.json."""
     command = [sys.executable, str(script_path), "--env", "Hopper-v4", "--seeds", "1"]
     command += ["--epochs", str(epochs), "--eval-every", str(epochs), "--eval-episodes", "1"]
     command += ["--output-dir", str(out)]
     if cuda:
         command.append("--cuda")
-    timed_run(command)
+    pipes = {"stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE}
+    return subprocess.Popen(command, cwd=REPO_ROOT, text=True, **pipes)
+
+
+def ms_per_step(run: subprocess.Popen, out: Path) -> float:
+    """Wait for the run; its ms per training step."""
+    _, stderr = run.communicate()
+    if run.returncode != 0:
+        last_line = stderr.strip().splitlines()[-1:]
+        raise UsageError(f"{' '.join(run.args[1:])} failed: {last_line}")
     result = json.loads((out / "result_seeds1.json").read_text())
     return result["scores"]["1"]["ms_per_step"]
 
@@ -43,7 +55,7 @@ def main(argv=None) -> int:
     parser.add_argument("--scripts", nargs="+", default=["bc_oh", "c2f", "fca"])
     parser.add_argument("--baseline", default=BEFORE_FUSED_ADAM, help="the commit to compare with")
     parser.add_argument("--epochs", type=int, default=20)
-    parser.add_argument("--repeats", type=int, default=2, help="runs of each version, alternating")
+    parser.add_argument("--repeats", type=int, default=3, help="pairs of runs of each script")
     parser.add_argument("--cuda", action="store_true", help="train both versions on the GPU")
     options = parser.parse_args(argv)
     for script in options.scripts:
@@ -51,27 +63,32 @@ def main(argv=None) -> int:
             raise UsageError(f"unknown script {script}.py: name a method file, e.g. c2f")
     if options.epochs <= 0 or options.repeats <= 0:
         raise UsageError("--epochs and --repeats must be positive")
-    versions = [options.baseline, "HEAD"]
-    times = {}
+    before = {script: [] for script in options.scripts}
+    after = {script: [] for script in options.scripts}
     with tempfile.TemporaryDirectory() as tmp:
         for repeat in range(options.repeats):
             for script in options.scripts:
-                for version in versions:
-                    path = script_at(version, script, Path(tmp))
-                    out = Path(tmp, f"out_{script}_{version}_{repeat}")
-                    seconds = step_time(path, options.epochs, out, options.cuda)
-                    times.setdefault((script, version), []).append(seconds)
-                    print(f"{script} at {version}: {seconds:.3f} ms a step", file=sys.stderr)
-    print(f"machine: {machine_line()}; Hopper-v4, {options.epochs} epochs, one thread")
+                old_path = script_at(options.baseline, script, Path(tmp))
+                new_path = script_at("HEAD", script, Path(tmp))
+                old_out = Path(tmp, f"{script}_baseline_{repeat}")
+                new_out = Path(tmp, f"{script}_new_{repeat}")
+                old_run = start(old_path, options.epochs, old_out, options.cuda)
+                new_run = start(new_path, options.epochs, new_out, options.cuda)
+                before[script].append(ms_per_step(old_run, old_out))
+                after[script].append(ms_per_step(new_run, new_out))
+                pair = f"{before[script][-1]:.3f} and {after[script][-1]:.3f} ms a step"
+                print(f"{script}, pair {repeat + 1}: {pair}", file=sys.stderr)
+    print(f"machine: {machine_line()}")
+    print(f"Hopper-v4, {options.epochs} epochs, one thread a run, the two versions at once")
     print(
         f"| script | ms a step at {options.baseline} | ms a step now | now / {options.baseline} |"
     )
     print("|---|---:|---:|---:|")
     for script in options.scripts:
-        before = times[script, options.baseline]
-        after = times[script, "HEAD"]
-        ratio = statistics.median(after) / statistics.median(before)
-        print(f"| `{script}.py` | {figures(before)} | {figures(after)} | {ratio:.2f}x |")
+        ratios = [new / old for old, new in zip(before[script], after[script])]
+        ratio = statistics.median(ratios)
+        row = f"| `{script}.py` | {figures(before[script])} | {figures(after[script])} |"
+        print(f"{row} {ratio:.2f}x |")
     return 0
 
 
