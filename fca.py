@@ -244,8 +244,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         # G runs once a step, so BatchNorm's running statistics move once a step.
         embedding = policy.embed(inputs[idx])
         actions = targets[idx]
-        adversary_loss = adversary_step(policy, optimizer, embedding, actions, previous[idx])
-        loss, _ = encoder_policy_step(policy, optimizer, embedding, actions, previous[idx], weight)
+        previous_action = previous[idx]
+        adversary_loss = adversary_step(policy, optimizer, embedding, actions, previous_action)
+        loss, _ = encoder_policy_step(policy, optimizer, embedding, actions, previous_action, weight)
         return loss, adversary_loss
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
