@@ -52,7 +52,7 @@ class Args:
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, one run each; the result is their mean ± std"""
     workers: int | None = None
-    """seeds trained at once, one process each; None: one per core (1 with --cuda)"""
+    """seeds trained at once, one process each; None: one per seed (1 with --cuda)"""
     demos: str | None = None
     """demonstrations (.npz); None: demos/<env>_<N>.npz, made by expert_ppo.py --make-demos"""
     num_demo_samples: int | None = None
@@ -241,8 +241,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
     def train_step(idx, stage=None):
         zeta, final = policy.coarse_and_final(inputs[idx])
-        final_loss = F.mse_loss(final, targets[idx])
-        coarse_loss = F.mse_loss(zeta, targets[idx])
+        actions = targets[idx]
+        final_loss = F.mse_loss(final, actions)
+        coarse_loss = F.mse_loss(zeta, actions)
         if stage == "coarse":
             # Two-stage training, stage 1: the coarse model alone, on its own loss.
             loss = coarse_loss
@@ -604,7 +605,9 @@ def run(args):
         output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
     os.makedirs(output_dir, exist_ok=True)
 
-    workers = min(args.workers or os.cpu_count(), len(args.seeds))
+    # One process per seed by default: on fewer cores the seeds share them, which is faster than
+    # waves of one seed a core that leave cores idle at the end (docs/speed.md).
+    workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:
         workers = 1
     print(f"progress lines: loss = {LOSS}; last eval = the mean return of the latest evaluation")

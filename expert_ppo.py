@@ -484,7 +484,6 @@ def train(args: Args):
     act_dim = envs.single_action_space.shape[0]
     action_low, action_high = envs.single_action_space.low, envs.single_action_space.high
     agent = Agent(obs_dim, act_dim, args.hidden)
-    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, fused=True)
     obs_rms = RunningMeanStd((obs_dim,))
     ret_rms = RunningMeanStd()

@@ -65,7 +65,10 @@ def main(argv=None) -> int:
     for (version, workers), seconds in times.items():
         runs = ", ".join(f"{value:.1f}" for value in seconds)
         median = statistics.median(seconds)
-        print(f"| {version} | {workers} | {runs} | {median:.1f} | {median / baseline:.2f}x |")
+        code = version
+        if version == "HEAD":
+            code = "this checkout"
+        print(f"| {code} | {workers} | {runs} | {median:.1f} | {median / baseline:.2f}x |")
     return 0
 
 

@@ -2,8 +2,11 @@
 exactly what it does when the seeds run one after another, and the combined result holds both, in order."""
 import json
 import re
+from types import SimpleNamespace
 
-from conftest import assert_usage_error, link_experts, run_in_process, run_script
+import numpy as np
+
+from conftest import assert_usage_error, fake_demos, link_experts, run_in_process, run_script, skip_evaluation, tiny_args
 import pytest
 from test_pinned_output import BUDGET, FIXED_MODE, LIBM_AS_PINNED, PINNED
 
@@ -88,3 +91,34 @@ def test_a_pool_worker_writes_each_printed_line_at_once(monkeypatch):
         assert raw.writes[2:] == [b"seed 2 | training\n"]
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.parametrize("flags, cores, expected", [({}, 2, 3), ({}, 16, 3), ({"workers": 2}, 16, 2), ({"workers": 8}, 2, 3)])
+def test_by_default_each_seed_has_its_own_worker(tmp_path, monkeypatch, flags, cores, expected):
+    """Three seeds on two cores run as one wave of three processes by default, not two waves of two (issue 56:
+    docs/speed.md measures it); --workers sets the count, at most one per seed."""
+    import bc_oh
+
+    pools = []
+
+    class Pool:
+        def __init__(self, workers, initializer):
+            pools.append(workers)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exception):
+            return False
+
+        def starmap(self, function, jobs, chunksize):
+            return [function(*job) for job in jobs]
+
+    context = SimpleNamespace(Pool=Pool)
+    monkeypatch.setattr(bc_oh.multiprocessing, "get_context", lambda method: context)
+    monkeypatch.setattr(bc_oh.os, "cpu_count", lambda: cores)
+    skip_evaluation(monkeypatch, bc_oh)
+    np.savez(tmp_path / "demos.npz", **fake_demos(256))
+    settings = {"seeds": [1, 2, 3], "workers": None, "demos": str(tmp_path / "demos.npz"), "output_dir": str(tmp_path / "out")}
+    bc_oh.run(tiny_args(bc_oh, **{**settings, **flags}))
+    assert pools == [expected]
