@@ -2,16 +2,19 @@
 tiny budget (the defaults of each method and the settings the regime map and Table 3 use) under MKL's fixed
 numeric mode, MKL_CBWR=COMPATIBLE: torch's CPU matrix products go through MKL, which otherwise picks its kernels
 by CPU, and MuJoCo amplifies their last-bit differences, so the default mode gives other digits on another CPU
-(README, Reproducibility). The values were recorded at commit 12c0a93 on an Intel Xeon (AVX-512); fca's was
-re-recorded on an AMD EPYC (Zen 4) when its method changed on purpose (issue 33).
+(README, Reproducibility). The values were recorded at commit 12c0a93 on an Intel Xeon (AVX-512), fca's re-recorded
+on an AMD EPYC (Zen 4) when its method changed on purpose (issue 33); all were re-recorded on an AMD EPYC (Zen 4) when
+every Adam became torch's fused one (issue 56), for that reason and no other: the printed epoch lines stayed the same,
+the evaluations moved by 1e-9 to 1.2e-7 relative (fca's by 7.4e-6), the rounding of one kernel against another.
 
 What holds across machines, as measured (README, Reproducibility): in the fixed mode the printed epoch lines are
 the same on the Intel Xeon and the AMD EPYC, and so are pinned exactly; the evaluations differ between those two
 CPUs by up to 3.6e-8 relative (1e-10 to 4e-8 over the cases), so they are pinned to PIN_TOLERANCE, about 30 times
 that; fca's by up to 1.05e-5, so it has its own (CASE_TOLERANCE). The difference is training's alone: the two
 CPUs' demos, forward passes and closed-loop evaluation of a committed policy agree bit for bit, their trained weights
-do not (benchmark/fingerprint.py's records, 2026-12-04). On one CPU they are the same bit for bit
-(test_one_cpu_imitating_two). A change of a method moves them by far more: test_a_changed_learning_rate_fails_the_pins shows it.
+do not (benchmark/fingerprint.py's records, 2026-12-04, made before fused Adam: results/fingerprints/8ce2c69/). On one
+CPU they are the same bit for bit, whether MKL runs its SSE4.2 or AVX2 kernels and torch its AVX2 or AVX-512 ones
+(test_one_cpu_imitating_two). No Intel CPU has run the fused-Adam pins yet. A change of a method moves them by far more: test_a_changed_learning_rate_fails_the_pins shows it.
 
 The pins need a CPU with FMA and AVX2 (Intel since 2013, AMD since 2015): without them glibc's libm runs other code
 for exp, sin, cos and pow, MuJoCo's trajectories part in their last bits, and the demonstrations and epoch lines
@@ -48,55 +51,55 @@ BUDGET = ("--env", "Hopper-v4", "--seeds", 1, "--epochs", 3, "--eval-every", 1, 
 PINNED = {
     "bc_oh": ("bc_oh", [],
         ["epoch 1/3 | loss 0.41194 | last eval 5.5", "epoch 2/3 | loss 0.44837 | last eval 5.6", "epoch 3/3 | loss 0.44358 | last eval 5.8"],
-        [5.481507009074632, 5.575409381661233, 5.763501721287875]),
+        [5.4815068817504535, 5.575409521185545, 5.763501822598074]),
     "c2f": ("c2f", [],
         ["epoch 1/3 | loss 0.72757 | last eval 212.0", "epoch 2/3 | loss 0.75569 | last eval 185.4", "epoch 3/3 | loss 0.73433 | last eval 90.9"],
-        [212.0290008964853, 185.3938139120271, 90.92470475897451]),
+        [212.02897605363432, 185.3938132281013, 90.92470548581613]),
     "bc_oh_hidden": ("bc_oh", ["--hide-velocities"],
         ["epoch 1/3 | loss 0.38415 | last eval 21.6", "epoch 2/3 | loss 0.40119 | last eval 24.5", "epoch 3/3 | loss 0.40038 | last eval 25.7"],
-        [21.550929826220223, 24.45770861809345, 25.652883571384997]),
+        [21.550929660282875, 24.45770858222134, 25.65288286955353]),
     "c2f_output_fs1": ("c2f_table3", ["--fusion", "output", "--frame-skip", 1],
         ["epoch 1/3 | loss 0.76668 | last eval 8.0", "epoch 2/3 | loss 0.99929 | last eval 8.2", "epoch 3/3 | loss 0.95021 | last eval 8.2"],
-        [7.991499029603305, 8.18671976969248, 8.248357507659978]),
+        [7.991499033650937, 8.186719769456332, 8.248357499633197]),
     "c2f_two_stage": ("c2f_table3", ["--two-stage"],
         ["epoch 1/3 | loss 0.36140 | last eval n/a", "epoch 2/3 | loss 0.37972 | last eval n/a", "epoch 3/3 | loss 0.35987 | last eval n/a", "epoch 1/3 | loss 0.36602 | last eval 172.0", "epoch 2/3 | loss 0.37594 | last eval 107.5", "epoch 3/3 | loss 0.37445 | last eval 95.1"],
-        [172.02843370688328, 107.52890702862337, 95.09800347687337]),
+        [172.028436385825, 107.52890692211584, 95.09800132539624]),
     "c2f_middle": ("c2f_table3", ["--fusion", "middle", "--hide-velocities"],
         ["epoch 1/3 | loss 0.74418 | last eval 38.2", "epoch 2/3 | loss 0.78286 | last eval 39.8", "epoch 3/3 | loss 0.76615 | last eval 40.4"],
-        [38.24394387184827, 39.802760374833426, 40.41556138311377]),
+        [38.24394388018163, 39.80276037808818, 40.415561311654315]),
     "c2f_early": ("c2f_table3", ["--fusion", "early", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75365 | last eval 29.2", "epoch 2/3 | loss 0.79096 | last eval 29.9", "epoch 3/3 | loss 0.77317 | last eval 30.5"],
-        [29.24531597562342, 29.908453222002052, 30.450676017948314]),
+        [29.24531594528206, 29.908453227011474, 30.450676126880527]),
     "c2f_penultimate": ("c2f_table3", ["--fusion", "penultimate", "--hide-velocities"],
         ["epoch 1/3 | loss 0.72177 | last eval 38.4", "epoch 2/3 | loss 0.75806 | last eval 39.4", "epoch 3/3 | loss 0.74964 | last eval 38.8"],
-        [38.41211870295702, 39.421973277920486, 38.80078297540449]),
+        [38.41211822741548, 39.421972744133, 38.800783510151874]),
     "c2f_feature": ("c2f_table3", ["--coarse-output", "feature", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75064 | last eval 156.0", "epoch 2/3 | loss 0.78470 | last eval 157.6", "epoch 3/3 | loss 0.77423 | last eval 159.0"],
-        [156.00988925991166, 157.60431646315612, 159.01969606819398]),
+        [156.00988980135807, 157.6043177951157, 159.01969620898598]),
     "c2f_coarse_history": ("c2f_table3", ["--coarse-input", "history", "--hide-velocities"],
         ["epoch 1/3 | loss 0.74170 | last eval 23.6", "epoch 2/3 | loss 0.78158 | last eval 24.2", "epoch 3/3 | loss 0.78142 | last eval 24.0"],
-        [23.59313855017924, 24.234180457125486, 24.04523089884483]),
+        [23.593138878221154, 24.23418149507276, 24.045231792978868]),
     "c2f_coarse_history_policy_current": ("c2f_table3", ["--coarse-input", "history", "--policy-input", "current", "--hide-velocities"],
         ["epoch 1/3 | loss 0.75807 | last eval 43.9", "epoch 2/3 | loss 0.78946 | last eval 42.9", "epoch 3/3 | loss 0.78553 | last eval 41.7"],
-        [43.943607880611765, 42.88653846039645, 41.68191756711971]),
+        [43.94360807700998, 42.88653840056776, 41.6819182109557]),
     "c2f_no_stop_gradient": ("c2f_table3", ["--no-stop-gradient", "--hide-velocities"],
         ["epoch 1/3 | loss 0.73226 | last eval 42.8", "epoch 2/3 | loss 0.77278 | last eval 42.7", "epoch 3/3 | loss 0.75966 | last eval 41.5"],
-        [42.82993645942999, 42.653890778644694, 41.49852599926946]),
+        [42.82993632108068, 42.65389087179977, 41.498526055818715]),
     "c2f_no_coarse": ("c2f_table3", ["--no-coarse-action", "--hide-velocities"],
         ["epoch 1/3 | loss 0.36717 | last eval 41.6", "epoch 2/3 | loss 0.38409 | last eval 41.6", "epoch 3/3 | loss 0.38078 | last eval 40.6"],
-        [41.574384115404115, 41.60107246166403, 40.57713920090737]),
+        [41.57438442574792, 41.6010724343859, 40.57713859635703]),
     "fca": ("fca", [],  # re-recorded for the authors' BatchNorm encoder (issue 33), on an AMD EPYC (Zen 4)
         ["epoch 1/3 | loss 0.30386 | adversary error 0.46081 | last eval 69.7", "epoch 2/3 | loss 0.29206 | adversary error 0.49950 | last eval 19.4", "epoch 3/3 | loss 0.32860 | adversary error 0.49926 | last eval 16.5"],
-        [69.68972869318759, 19.365284873949097, 16.464610296027516]),
+        [69.69024529272632, 19.365407348352953, 16.464570842696123]),
     "keyframe": ("keyframe", [],
         ["epoch 1/3 | loss 0.49967 | last eval 11.0", "epoch 2/3 | loss 0.80457 | last eval 11.0", "epoch 3/3 | loss 0.60385 | last eval 11.1"],
-        [11.009662452200125, 11.044730595232284, 11.08239503200669]),
+        [11.009662459420957, 11.044730610712293, 11.082395003864645]),
     "average_ensemble": ("average_ensemble", [],
         ["epoch 1/3 | loss bc_so 0.36140, bc_oh 0.41194 | last eval 11.3, bc_so 11.1, bc_oh 5.5", "epoch 2/3 | loss bc_so 0.37972, bc_oh 0.44837 | last eval 11.9, bc_so 11.1, bc_oh 5.6", "epoch 3/3 | loss bc_so 0.35987, bc_oh 0.44358 | last eval 12.1, bc_so 11.1, bc_oh 5.8"],
-        [11.298109218093174, 11.947105895740968, 12.14094789898898]),
+        [11.298109274798296, 11.947105784097985, 12.140947939616558]),
     "dagger": ("dagger", ["--dagger-samples", 100, "--dagger-rounds", 2, "--dagger-epochs", 2],
         ["round 0 | epoch 1/7 | loss 0.41194 | last eval 5.5", "round 0 | epoch 2/7 | loss 0.44837 | last eval 5.6", "round 0 | epoch 3/7 | loss 0.44358 | last eval 5.8", "round 1 | epoch 4/7 | loss 0.44464 | last eval 5.4", "round 1 | epoch 5/7 | loss 0.45146 | last eval 5.6", "round 2 | epoch 6/7 | loss 0.43738 | last eval 4.8", "round 2 | epoch 7/7 | loss 0.55145 | last eval 5.0"],
-        [5.481507009074632, 5.575409381661233, 5.763501721287875, 5.407442888092952, 5.572265714302864, 4.837532647132879, 5.018537831544904, 4.897644940558244, 5.002459901302231]),
+        [5.4815068817504535, 5.575409521185545, 5.763501822598074, 5.407443089138905, 5.572266032743634, 4.837532344524785, 5.018537675348245, 4.897645361876352, 5.0024600446467336]),
 }
 """case -> (script, its flags beyond BUDGET, the printed epoch lines (timings left out), the evaluations in the JSON)"""
 
@@ -152,10 +155,15 @@ def test_a_changed_learning_rate_fails_the_pins(tmp_path, case):
 @needs_mkl
 @pytest.mark.parametrize("script", ["bc_oh", "c2f"])
 def test_one_cpu_imitating_two_prints_the_same_digits_in_the_fixed_mode(tmp_path, script):
-    """MKL told to use only SSE4.2 kernels, or only AVX2 ones (two CPUs of different ages), in the fixed mode: the
-    same losses, evaluations and demo arrays, bit for bit. It fails if the mode stops working, or if another part of
-    the pipeline (numpy, MuJoCo, torch outside MKL) starts to depend on the CPU."""
-    runs = [tiny_run(tmp_path / isa, script, [], {**FIXED_MODE, "MKL_ENABLE_INSTRUCTIONS": isa}) for isa in ("SSE4_2", "AVX2")]
+    """Two CPUs of different ages imitated on one: MKL told to use only SSE4.2 kernels and torch its AVX2 ones, or MKL
+    its AVX2 kernels and torch its AVX-512 ones (AVX2 where the CPU has no AVX-512), in the fixed mode: the same
+    losses, evaluations and demo arrays, bit for bit. It fails if the mode stops working, or if another part of the
+    pipeline (numpy, MuJoCo, torch's own kernels such as fused Adam's) starts to depend on the CPU. (torch without
+    vector code, ATEN_CPU_CAPABILITY=default, gives other last digits of the evaluations, before fused Adam too:
+    measured 2026-12-06; no x86-64 CPU of the last decade runs that code.)"""
+    arms = {"SSE4_2": "avx2", "AVX2": "avx512"}
+    runs = [tiny_run(tmp_path / isa, script, [], {**FIXED_MODE, "MKL_ENABLE_INSTRUCTIONS": isa, "ATEN_CPU_CAPABILITY": aten})
+            for isa, aten in arms.items()]
     (lines, evaluations, demos), (other_lines, other_evaluations, other_demos) = runs
     assert lines == other_lines and len(lines) == 3
     assert evaluations == other_evaluations
