@@ -482,8 +482,7 @@ def run(args):
         output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
     os.makedirs(output_dir, exist_ok=True)
 
-    # One process per seed by default: on fewer cores the seeds share them, which is faster than
-    # waves of one seed a core that leave cores idle at the end (docs/speed.md).
+    # One process per seed: sharing few cores beats waves that leave cores idle (docs/speed.md).
     workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:
         workers = 1
