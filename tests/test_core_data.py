@@ -96,6 +96,30 @@ def test_evaluation_feeds_the_policy_the_history_of_stack_history():
     assert len({row.tobytes() for row in observations}) == len(inputs), "a new frame every step"
 
 
+@pytest.mark.parametrize("hide", [False, True])
+def test_an_evaluation_makes_one_env_an_episode_and_each_reads_its_own_velocities(monkeypatch, hide):
+    """Issue 56: evaluate() makes the envs it plays and no other (it once made one more, only to read the velocity
+    layout); each sensor env finds Hopper's velocities itself: hidden, they are zeros in the policy's inputs."""
+    made = []
+    make_env = bc_oh.make_env
+
+    def counting_make_env(*args, **kwargs):
+        made.append(args)
+        return make_env(*args, **kwargs)
+
+    seen = []
+
+    def policy(inputs):
+        seen.append(inputs.numpy().copy())
+        return torch.zeros(len(inputs), 3)
+
+    monkeypatch.setattr(bc_oh, "make_env", counting_make_env)
+    bc_oh.evaluate(policy, tiny_args(bc_oh, history=1, hide_velocities=hide, frame_skip=4), 3, 5, torch.device("cpu"))
+    assert len(made) == 3
+    velocities = np.concatenate(seen)[:, 5:11]
+    assert (velocities == 0).all() == hide
+
+
 # ----------------------------------------------------------------------------------------------
 # Demonstrations
 
