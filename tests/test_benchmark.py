@@ -435,3 +435,23 @@ def test_aggregator_without_valid_results_is_one_line(tmp_path):
     assert "not the paper's settings (epochs 3 != 1000)" in lines[0] and lines[1].startswith("error: no valid results to aggregate")
     assert not (tmp_path / "out").exists()
 
+
+
+def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_they_cannot_time(tmp_path):
+    """benchmark.baseline.script_at writes `git show <commit>:<script>.py` (HEAD: the checkout's own file); an unknown
+    commit, an unknown script or a size that is not positive ends in one UsageError, before anything runs."""
+    from benchmark import main_job_time, step_time
+    from benchmark.baseline import BEFORE_FUSED_ADAM, script_at
+
+    assert script_at("HEAD", "c2f", tmp_path) == REPO_ROOT / "c2f.py"
+    if not (REPO_ROOT / ".git").exists():
+        pytest.skip("no git history here (an unpacked archive): the baseline's file cannot be shown")
+    old = script_at(BEFORE_FUSED_ADAM, "c2f", tmp_path)
+    assert old == tmp_path / BEFORE_FUSED_ADAM / "c2f.py"
+    assert "fused=True" not in old.read_text() and "fused=True" in (REPO_ROOT / "c2f.py").read_text()
+    with pytest.raises(UsageError, match="git cannot show c2f.py at 'no-such-commit'"):
+        script_at("no-such-commit", "c2f", tmp_path)
+    with pytest.raises(UsageError, match="unknown script nothing.py"):
+        step_time.main(["--scripts", "nothing"])
+    with pytest.raises(UsageError, match="must be positive"):
+        main_job_time.main(["--repeats", "0"])
