@@ -400,7 +400,6 @@ class PartialObservation(gym.ObservationWrapper):
 
 
 def make_sensor_env(args, seed: int) -> gym.Env:
-    """The env at --frame-skip, seen through the sensor of --obs-noise-std or --hide-velocities."""
     env = make_env(args.env, args.frame_skip)
     dims = velocity_dims(env, args.env)
     return PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -605,7 +604,6 @@ def run(args):
         output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
     os.makedirs(output_dir, exist_ok=True)
 
-    # One process per seed: sharing few cores beats waves that leave cores idle (docs/speed.md).
     workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:
         workers = 1

@@ -43,20 +43,19 @@ def skip_unwritten(name):
 
 
 CEILINGS = {
-    "bc_oh": 531,
-    "bc_so": 533,
-    "history_dropout": 544,
-    "c2f": 559,
-    "fca": 637,
-    "keyframe": 629,
-    "average_ensemble": 611,
-    "dagger": 701,
-    "c2f_table3": 654,
+    "bc_oh": 529,
+    "bc_so": 531,
+    "history_dropout": 542,
+    "c2f": 557,
+    "fca": 635,
+    "keyframe": 627,
+    "average_ensemble": 609,
+    "dagger": 699,
+    "c2f_table3": 652,
     "expert_ppo": 700,
 }
-"""formatted lines at 100 columns each file had when issue 55 landed, written plainly, plus issue 56's four (the
-fused-Adam comment, the import of torch.nn.functional, make_sensor_env's docstring, the comment on --workers' default;
-less evaluate's extra env): a file may shrink towards its
+"""formatted lines at 100 columns each file had when issue 55 landed, written plainly, plus issue 56's two (the
+fused-Adam comment and the import of torch.nn.functional; evaluate's extra env went, make_sensor_env reads the velocities): a file may shrink towards its
 target (file_sizes.TARGETS; docs/contributing.md says what holds each one above it), never grow past this; lower a
 ceiling when a file shrinks"""
 
