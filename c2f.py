@@ -1,10 +1,10 @@
 # Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Table 2); see README.md
-"""C2F: a coarse MLP pi_phi on the current frame o_t gives a coarse action zeta; the policy MLP
-pi_theta on the history [o_{t-H+1}, ..., o_t] and the stop-gradient sg(zeta) gives the final action.
+"""C2F: a coarse MLP pi_phi on o_t gives a coarse action zeta; an MLP pi_theta encodes the history
+[o_{t-H+1}, ..., o_t]; one more layer maps that feature and zeta, through a stop-gradient, to a_t.
 
-Copying zeta is a simpler shortcut than inferring and copying a_{t-1}, so the policy learns to
-refine it instead of becoming a copycat. Table 3's ablations and the capacity control are in
-c2f_table3.py.
+zeta, a guess of a_t from o_t alone, is easier to copy than the a_{t-1} the history reveals (the
+copycat shortcut), so the policy learns to refine zeta. Table 3's ablations and the capacity
+control are in c2f_table3.py.
 
     python c2f.py --env Hopper-v4
 """
@@ -107,10 +107,10 @@ class Policy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         self.obs_dim = obs_dim
-        # The coarse model pi_phi: BC-SO's MLP on the current frame o_t; its output is zeta.
+        # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(obs_dim, act_dim, hidden)
-        # The policy model pi_theta: three layers on the whole history (split after the first as
-        # in c2f_table3.py, so that both files save their weights under the same names).
+        # The policy model pi_theta: three hidden layers on the history, one more than BC-OH's MLP
+        # (docs/methods.md); split after the first, as in c2f_table3.py, so the weights share names.
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
@@ -118,7 +118,7 @@ class Policy(nn.Module):
         self.head = nn.Linear(hidden + act_dim, act_dim)
 
     def coarse_and_final(self, obs_history):
-        """zeta and the final action: the two outputs that Eq. 2 trains."""
+        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
         normalized = self.normalize(obs_history)
         zeta = self.coarse(normalized[:, -self.obs_dim :])
         feature = self.policy_rest(self.policy_first(normalized))
@@ -127,7 +127,7 @@ class Policy(nn.Module):
         return zeta, final
 
     def forward(self, obs_history):
-        zeta, final = self.coarse_and_final(obs_history)
+        _, final = self.coarse_and_final(obs_history)
         return final
 
 
@@ -147,12 +147,12 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
-    """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
+    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -160,7 +160,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
@@ -473,7 +473,7 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
 def start_worker():
     # Ctrl-C reaches every process of the job; the main process alone handles it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # One write a printed line, so the lines of parallel seeds do not mix.
+    # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 

@@ -137,7 +137,7 @@ class Policy(nn.Module):
         self.policy_width = obs_dim * args.history
         if args.policy_input == "current":
             self.policy_width = obs_dim
-        # The coarse model pi_phi: BC-SO's MLP on the current frame o_t; its output is zeta.
+        # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(self.coarse_width, act_dim, hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
         fed = act_dim
@@ -175,7 +175,7 @@ class Policy(nn.Module):
         return zeta, coarse_feature
 
     def coarse_and_final(self, obs_history):
-        """zeta and the final action: the two outputs that Eq. 2 trains."""
+        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
         args = self.args
         zeta, coarse_feature = self.coarse_model(obs_history)
         fed = zeta
@@ -200,7 +200,7 @@ class Policy(nn.Module):
         return zeta, final
 
     def forward(self, obs_history):
-        zeta, final = self.coarse_and_final(obs_history)
+        _, final = self.coarse_and_final(obs_history)
         return final
 
 
@@ -220,7 +220,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
-    """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
+    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
     if args.two_stage and not args.coarse_action:
         both = "--two-stage trains the coarse model first, --no-coarse-action never uses it"
         raise UsageError(f"{both}: pass one of them")
@@ -228,7 +228,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -236,7 +236,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx, stage=None):
@@ -568,7 +568,7 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
 def start_worker():
     # Ctrl-C reaches every process of the job; the main process alone handles it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # One write a printed line, so the lines of parallel seeds do not mix.
+    # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 

@@ -491,7 +491,7 @@ class C2FPolicy(nn.Module):
         self.policy_width = obs_dim * args.history
         if args.policy_input == "current":
             self.policy_width = obs_dim
-        # The coarse model pi_phi: BC-SO's MLP on the current frame o_t; its output is zeta.
+        # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(self.coarse_width, act_dim, hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
         fed = act_dim
@@ -529,7 +529,7 @@ class C2FPolicy(nn.Module):
         return zeta, coarse_feature
 
     def coarse_and_final(self, obs_history):
-        """zeta and the final action: the two outputs that Eq. 2 trains."""
+        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
         args = self.args
         zeta, coarse_feature = self.coarse_model(obs_history)
         fed = zeta
@@ -554,7 +554,7 @@ class C2FPolicy(nn.Module):
         return zeta, final
 
     def forward(self, obs_history):
-        zeta, final = self.coarse_and_final(obs_history)
+        _, final = self.coarse_and_final(obs_history)
         return final
 
 

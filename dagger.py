@@ -192,7 +192,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -200,7 +200,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
@@ -600,7 +600,7 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
 def start_worker():
     # Ctrl-C reaches every process of the job; the main process alone handles it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # One write a printed line, so the lines of parallel seeds do not mix.
+    # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 

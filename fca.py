@@ -211,12 +211,12 @@ def authors_setting(env_id: str, weight: float | None, lr_ratio: float | None) -
 
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
-    """Train a policy on the demos: its evaluations [(epoch, mean return)], itself, ms a step."""
+    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees noisy observations (section 5.1), stacked into a history of H frames.
+    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -236,7 +236,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # One Adam with the authors' betas; D is a parameter group of its own, at its own rate.
     g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]
     groups = [{"params": g_and_f}, {"params": policy.adversary.parameters(), "lr": d_rate}]
-    # fused=True runs Adam's update as one kernel: the same arithmetic, a faster step.
+    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999), fused=True)
 
     def train_step(idx):
@@ -551,7 +551,7 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
 def start_worker():
     # Ctrl-C reaches every process of the job; the main process alone handles it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # One write a printed line, so the lines of parallel seeds do not mix.
+    # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 
