@@ -74,10 +74,6 @@ class Args:
     """train on the GPU"""
 
 
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
 # ---- The method: BC-OH's network, loss and training loop ----
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP (section 8.3)."""
@@ -218,6 +214,10 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- The env and its partial observability (section 5.1) ----
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:

@@ -97,11 +97,6 @@ class Args:
     """train the coarse model alone for --epochs and freeze it, then the rest for --epochs"""
 
 
-# Copied from bc_oh.UsageError
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
 # ---- The method: C2F's networks, loss and training loop, with Table 3's ablations ----
 # Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
@@ -341,6 +336,10 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- The env and its partial observability (section 5.1) ----
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:

@@ -90,11 +90,6 @@ class Args:
             raise UsageError(f"--embedding-dim must be positive, got {self.embedding_dim}")
 
 
-# Copied from bc_oh.UsageError
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
 # ---- The method: FCA's networks G, F and D, their losses and the training loop ----
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The authors' F and D: one hidden layer, each Linear after a LeakyReLU(0.2)."""
@@ -324,6 +319,10 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- The env and its partial observability (section 5.1) ----
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:

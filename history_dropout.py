@@ -79,12 +79,8 @@ class Args:
             raise UsageError(f"--history-dropout must lie in [0, 1), got {self.history_dropout}")
 
 
-# Copied from bc_oh.UsageError..Normalizer
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
 # ---- The method: BC-OH's network, loss and training loop ----
+# Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP (section 8.3)."""
     layers = [nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
@@ -231,6 +227,10 @@ def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
 
 
 # ---- The env and its partial observability (section 5.1) ----
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
