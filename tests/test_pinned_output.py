@@ -14,7 +14,9 @@ that; fca's by up to 1.05e-5, so it has its own (CASE_TOLERANCE). The difference
 CPUs' demos, forward passes and closed-loop evaluation of a committed policy agree bit for bit, their trained weights
 do not (benchmark/fingerprint.py's records, 2026-12-04, made before fused Adam: results/fingerprints/8ce2c69/). On one
 CPU they are the same bit for bit, whether MKL runs its SSE4.2 or AVX2 kernels and torch its AVX2 or AVX-512 ones
-(test_one_cpu_imitating_two). No Intel CPU has run the fused-Adam pins yet. A change of a method moves them by far more: test_a_changed_learning_rate_fails_the_pins shows it.
+(test_one_cpu_imitating_two; AVX-512 where the CPU has it). The fused-Adam pins, recorded on a Zen 4, pass on a Zen 3
+(AVX2, no AVX-512; 2026-12-07); no Intel CPU has run them yet. A change of a method moves them by far more:
+test_a_changed_learning_rate_fails_the_pins shows it.
 
 The pins need a CPU with FMA and AVX2 (Intel since 2013, AMD since 2015): without them glibc's libm runs other code
 for exp, sin, cos and pow, MuJoCo's trajectories part in their last bits, and the demonstrations and epoch lines
@@ -157,9 +159,9 @@ def test_a_changed_learning_rate_fails_the_pins(tmp_path, case):
 def test_one_cpu_imitating_two_prints_the_same_digits_in_the_fixed_mode(tmp_path, script):
     """Two CPUs of different ages imitated on one: MKL told to use only SSE4.2 kernels and torch its AVX2 ones, or MKL
     its AVX2 kernels and torch its AVX-512 ones (AVX2 where the CPU has no AVX-512: asked for kernels the CPU
-    lacks, torch dies of SIGILL), in the fixed mode: the same losses, evaluations and demo arrays, bit for bit. It fails if the mode stops working, or if another part of the
-    pipeline (numpy, MuJoCo, torch's own kernels such as fused Adam's) starts to depend on the CPU. (torch without
-    vector code, ATEN_CPU_CAPABILITY=default, gives other last digits of the evaluations, before fused Adam too:
+    lacks, torch dies of SIGILL), in the fixed mode: the same losses, evaluations and demo arrays, bit for bit. It
+    fails if the mode stops working, or if another part of the pipeline (numpy, MuJoCo, torch's own kernels such as
+    fused Adam's) starts to depend on the CPU. (torch without vector code, ATEN_CPU_CAPABILITY=default, gives other last digits of the evaluations, before fused Adam too:
     measured 2026-12-06; no x86-64 CPU of the last decade runs that code.)"""
     best = torch.backends.cpu.get_cpu_capability().lower()
     older = "avx2" if best in ("avx2", "avx512") else best
