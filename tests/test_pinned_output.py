@@ -161,8 +161,9 @@ def test_one_cpu_imitating_two_prints_the_same_digits_in_the_fixed_mode(tmp_path
     its AVX2 kernels and torch its AVX-512 ones (AVX2 where the CPU has no AVX-512: asked for kernels the CPU
     lacks, torch dies of SIGILL), in the fixed mode: the same losses, evaluations and demo arrays, bit for bit. It
     fails if the mode stops working, or if another part of the pipeline (numpy, MuJoCo, torch's own kernels such as
-    fused Adam's) starts to depend on the CPU. (torch without vector code, ATEN_CPU_CAPABILITY=default, gives other last digits of the evaluations, before fused Adam too:
-    measured 2026-12-06; no x86-64 CPU of the last decade runs that code.)"""
+    fused Adam's) starts to depend on the CPU. (torch without vector code, ATEN_CPU_CAPABILITY=default, gives other
+    last digits of the evaluations, before fused Adam too: measured 2026-12-06; no x86-64 CPU of the last decade runs
+    that code.)"""
     best = torch.backends.cpu.get_cpu_capability().lower()
     older = "avx2" if best in ("avx2", "avx512") else best
     arms = {"SSE4_2": older, "AVX2": best}
