@@ -133,7 +133,6 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):

@@ -231,7 +231,6 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # One Adam with the authors' betas; D is a parameter group of its own, at its own rate.
     g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]
     groups = [{"params": g_and_f}, {"params": policy.adversary.parameters(), "lr": d_rate}]
-    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999), fused=True)
 
     def train_step(idx):

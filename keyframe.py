@@ -220,7 +220,6 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     found += f" (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
     print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {found}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
-    # fused=True runs Adam's update as one kernel: faster, the same update up to rounding.
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
