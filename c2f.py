@@ -537,7 +537,8 @@ def run(args):
     scores = [entry["score"] for entry in per_seed.values()]
     mean = np.mean(scores)
     seeds = "seed" if len(scores) == 1 else "seeds"
-    line = f"{args.env} {METHOD}: {mean:.1f} ± {np.std(scores):.1f} over {len(scores)} {seeds}"
+    spread = f"mean ± std over {len(scores)} {seeds}"
+    line = f"{args.env} {METHOD}: score {mean:.1f} ± {np.std(scores):.1f} ({spread})"
     # Demos from elsewhere (e.g. Minari) have no expert to compare with.
     if "expert_return" in meta:
         line += f", {mean / meta['expert_return']:.0%} of the expert's {meta['expert_return']:.0f}"

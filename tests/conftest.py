@@ -117,7 +117,7 @@ def skip_evaluation(monkeypatch, module, score=0.0):
 
 def smoke_run(script, directory, *extra):
     """Run `script` with SMOKE_ARGS (plus `extra`) in `directory` (experts linked there), check that it
-    succeeds, ends with the summary line `Hopper-v4 METHOD: MEAN ± STD over 1 seed, P% of the expert's E` and writes a JSON
+    succeeds, ends with the summary line `Hopper-v4 METHOD: score MEAN ± STD (mean ± std over 1 seed), P% of the expert's E` and writes a JSON
     result that agrees with it; return (stdout, the JSON result as a dict)."""
     import json
     import re
@@ -126,7 +126,7 @@ def smoke_run(script, directory, *extra):
     result = run_script(script, *SMOKE_ARGS, "--output-dir", directory / "out", *extra, cwd=directory)
     assert result.returncode == 0, result.stderr
     method = Path(script).stem
-    match = re.fullmatch(rf"Hopper-v4 {method}: (-?[\d.]+) ± ([\d.]+) over 1 seed, \d+% of the expert's \d+", result.stdout.strip().splitlines()[-1])
+    match = re.fullmatch(rf"Hopper-v4 {method}: score (-?[\d.]+) ± ([\d.]+) \(mean ± std over 1 seed\), \d+% of the expert's \d+", result.stdout.strip().splitlines()[-1])
     assert match, result.stdout
     summary = json.loads((directory / "out" / "result_seeds1.json").read_text())
     assert summary["method"] == method and summary["env"] == "Hopper-v4"

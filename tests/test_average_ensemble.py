@@ -75,7 +75,7 @@ def test_tiny_run_reports_the_ensemble_and_both_members(tmp_path):
     result = run_script("average_ensemble.py", *SMOKE_ARGS, "--output-dir", "out", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.strip().splitlines()
-    summary = re.fullmatch(r"Hopper-v4 average_ensemble: (-?[\d.]+) ± ([\d.]+) over 1 seed, \d+% of the expert's 3305", lines[-1])
+    summary = re.fullmatch(r"Hopper-v4 average_ensemble: score (-?[\d.]+) ± ([\d.]+) \(mean ± std over 1 seed\), \d+% of the expert's 3305", lines[-1])
     assert summary, lines[-1]
     row = next(line for line in lines if re.match(r"\s+1 \|", line))
     ensemble_score, so_score, oh_score = map(float, row.split("|")[1:])

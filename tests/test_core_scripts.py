@@ -13,7 +13,7 @@ import torch
 import c2f_table3
 from conftest import SMOKE_ARGS, assert_usage_error, fake_demos, link_experts, run_in_process, run_script
 
-SUMMARY = re.compile(r"^Hopper-v4 (\w+): (-?\d+\.\d) ± (\d+\.\d) over (\d+) seeds?, (\d+)% of the expert's (\d+)$")
+SUMMARY = re.compile(r"^Hopper-v4 (\w+): score (-?\d+\.\d) ± (\d+\.\d) \(mean ± std over (\d+) seeds?\), (\d+)% of the expert's (\d+)$")
 
 
 @pytest.fixture(scope="module")

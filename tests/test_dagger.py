@@ -121,7 +121,7 @@ def test_tiny_run_prints_the_summary_and_writes_the_json(tmp_path):
     result = run_script("dagger.py", *SMOKE_ARGS, "--dagger-samples", 60, "--dagger-rounds", 2, "--dagger-epochs", 1,
                         "--output-dir", "out", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    summary = re.fullmatch(r"Hopper-v4 dagger: (-?[\d.]+) ± ([\d.]+) over 1 seed, \d+% of the expert's 3305", result.stdout.strip().splitlines()[-1])
+    summary = re.fullmatch(r"Hopper-v4 dagger: score (-?[\d.]+) ± ([\d.]+) \(mean ± std over 1 seed\), \d+% of the expert's 3305", result.stdout.strip().splitlines()[-1])
     assert summary, result.stdout
     data = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     seed = data["scores"]["1"]

@@ -113,8 +113,8 @@ def summary(folder, monkeypatch, capsys, score, meta, **overrides) -> str:
 def test_the_summary_gives_the_share_of_the_expert_when_the_demos_name_one(tmp_path, monkeypatch, capsys):
     meta = {"env_id": "Hopper-v4", "frame_skip": 4, "expert_return": 3000.0, "expert_frame_skip": 4}
     line = summary(tmp_path, monkeypatch, capsys, 1500.0, meta, seeds=[1, 2])
-    assert line == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 2 seeds, 50% of the expert's 3000"
-    assert summary(tmp_path, monkeypatch, capsys, 1500.0, {}) == "Hopper-v4 bc_oh: 1500.0 ± 0.0 over 1 seed"  # no expert
+    assert line == "Hopper-v4 bc_oh: score 1500.0 ± 0.0 (mean ± std over 2 seeds), 50% of the expert's 3000"
+    assert summary(tmp_path, monkeypatch, capsys, 1500.0, {}) == "Hopper-v4 bc_oh: score 1500.0 ± 0.0 (mean ± std over 1 seed)"  # no expert
 
 
 def write_demos(path, observations, actions, starts):

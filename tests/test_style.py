@@ -44,20 +44,21 @@ def skip_unwritten(name):
 
 
 CEILINGS = {
-    "bc_oh": 528,
-    "bc_so": 530,
-    "history_dropout": 541,
-    "c2f": 555,
-    "fca": 633,
-    "keyframe": 625,
-    "average_ensemble": 607,
-    "dagger": 697,
-    "c2f_table3": 650,
+    "bc_oh": 529,
+    "bc_so": 531,
+    "history_dropout": 542,
+    "c2f": 556,
+    "fca": 634,
+    "keyframe": 626,
+    "average_ensemble": 608,
+    "dagger": 698,
+    "c2f_table3": 651,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns each file had when issue 55 landed, written plainly, plus issue 56's one (the
 import of torch.nn.functional, for F.mse_loss; evaluate's extra env went, make_sensor_env reads the velocities), less
-the one line each file copying UsageError lost when it moved into bc_oh's env section: a file may shrink towards its
+the one line each file copying UsageError lost when it moved into bc_oh's env section, plus issue 57's one (the
+summary line names its numbers: score, mean ± std): a file may shrink towards its
 target (file_sizes.TARGETS; docs/contributing.md says what holds each one above it), never grow past this; lower a
 ceiling when a file shrinks"""
 

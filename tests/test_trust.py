@@ -161,8 +161,8 @@ def test_the_summary_line_gives_the_share_of_the_experts_return(tmp_path, monkey
     monkeypatch.setattr(bc_oh, "evaluate", share)
     bc_oh.run(tiny_args(bc_oh, seeds=[1, 2], demos=str(make_demos("Hopper-v4", 300)), output_dir=str(tmp_path / "a")))
     assert capsys.readouterr().out.splitlines()[-1] == \
-        f"Hopper-v4 bc_oh: {expert * 0.41:.1f} ± {expert * 0.01:.1f} over 2 seeds, 41% of the expert's {expert:.0f}"
+        f"Hopper-v4 bc_oh: score {expert * 0.41:.1f} ± {expert * 0.01:.1f} (mean ± std over 2 seeds), 41% of the expert's {expert:.0f}"
     fast = make_demos("Hopper-v4", 300, 1)  # the same expert, rolled out at frame skip 1, its returns on the same scale
     bc_oh.run(tiny_args(bc_oh, seeds=[6], frame_skip=1, demos=str(fast), output_dir=str(tmp_path / "b")))
     assert capsys.readouterr().out.splitlines()[-1] == \
-        f"Hopper-v4 bc_oh: {expert * 0.5:.1f} ± 0.0 over 1 seed, 50% of the expert's {expert:.0f}"
+        f"Hopper-v4 bc_oh: score {expert * 0.5:.1f} ± 0.0 (mean ± std over 1 seed), 50% of the expert's {expert:.0f}"
