@@ -136,21 +136,14 @@ def split_budget(total: int, rounds: int) -> list:
     return [labels + 1] * remainder + [labels] * (rounds - remainder)
 
 
-def dagger_beta(round_number: int, beta_rounds: int) -> float:
-    """The probability that the expert acts: 1 in round 0, decaying linearly to 0."""
-    return max(0.0, 1.0 - round_number / beta_rounds)
-
-
 @torch.no_grad()
 def collect_round(policy, expert, args, num_labels: int, beta: float, rng, device) -> dict:
     """num_labels steps of the beta-mix: the learner's inputs, the states, the expert's labels."""
-    env = make_env(args.env, args.frame_skip)
-    dims = velocity_dims(env, args.env)
+    sensor = make_sensor_env(args, int(rng.integers(2**31)))
+    # The sensor's noise is added by hand, so that the env under it returns the clean observation.
+    env = sensor.env
     low = env.action_space.low
     high = env.action_space.high
-    # The sensor's noise is added by hand, so that the env itself returns the clean observation.
-    sensor_seed = int(rng.integers(2**31))
-    sensor = PartialObservation(env, dims, args.obs_noise_std, args.hide_velocities, sensor_seed)
     clean, _ = env.reset(seed=int(rng.integers(2**31)))
     frames = None
     data = {"inputs": [], "clean_observations": [], "labels": [], "expert_acted": []}
@@ -213,7 +206,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     def aggregate(round_number):
         # Roll out the beta-mix, label its states, and add them to the data train_step samples.
         nonlocal inputs, targets
-        beta = dagger_beta(round_number, args.dagger_beta_rounds or args.dagger_rounds)
+        # The expert acts with probability beta: 1 in round 0, decaying linearly to 0.
+        beta_rounds = args.dagger_beta_rounds or args.dagger_rounds
+        beta = max(0.0, 1.0 - round_number / beta_rounds)
         num_labels = budget[round_number - 1]
         policy.eval()
         data = collect_round(policy, expert, args, num_labels, beta, rng, device)
@@ -602,24 +597,11 @@ def start_worker():
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
 
-def check_dagger_args(args):
-    """Refuse bad DAgger settings, and a missing or wrong expert, before any training."""
-    for name in ["dagger_rounds", "dagger_epochs", "dagger_beta_rounds"]:
-        value = getattr(args, name)
-        if value is not None and value <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    if args.dagger_samples < args.dagger_rounds:
-        few = f"--dagger-samples {args.dagger_samples} is below one label per round"
-        few += f" of --dagger-rounds {args.dagger_rounds}"
-        raise UsageError(f"{few}: raise --dagger-samples or lower --dagger-rounds")
-    # The expert is queried online: a missing one fails now, not after round 0.
-    load_expert(args.expert.format(env=args.env), args.env)
-
-
 def run(args):
     """Check the flags, load the demos, train every seed, print the table and mean ± std."""
     # Sizes must be positive; None leaves a flag at its default.
     sizes = ["history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"]
+    sizes += ["dagger_rounds", "dagger_epochs", "dagger_beta_rounds"]
     for name in sizes + ["learning_rate", "frame_skip", "num_demo_samples", "workers"]:
         value = getattr(args, name)
         if value is not None and value <= 0:
@@ -630,6 +612,9 @@ def run(args):
         raise UsageError(f"--seeds needs distinct seeds, got {args.seeds}: e.g. --seeds 1 2 3")
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
+    if args.dagger_samples < args.dagger_rounds:
+        rounds = f"--dagger-rounds {args.dagger_rounds}"
+        raise UsageError(f"--dagger-samples must be at least {rounds}, got {args.dagger_samples}")
 
     env = make_env(args.env)
     velocity_dims(env, args.env)
@@ -637,7 +622,8 @@ def run(args):
     if args.frame_skip is None:
         args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
     make_env(args.env, args.frame_skip)
-    check_dagger_args(args)
+    # The expert is queried online: a missing one fails now, not after round 0.
+    load_expert(args.expert.format(env=args.env), args.env)
     # The paper's learning rates (section 8.3): 1e-5 for Hopper, 1e-4 for the others.
     if args.learning_rate is None:
         args.learning_rate = 1e-4

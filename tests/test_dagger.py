@@ -33,13 +33,10 @@ def collect(expert, beta, num_labels, history=2, seed=0):
     return dagger.collect_round(learner, expert, args, num_labels, beta, np.random.default_rng(seed), torch.device("cpu"))
 
 
-def test_budget_split_and_beta_schedule():
+def test_budget_split():
     assert dagger.split_budget(8000, 4) == [2000] * 4
     assert dagger.split_budget(10, 3) == [4, 3, 3]
     assert dagger.split_budget(3, 3) == [1, 1, 1]
-    assert [dagger.dagger_beta(r, 4) for r in range(1, 5)] == [0.75, 0.5, 0.25, 0.0]
-    assert dagger.dagger_beta(6, 4) == 0.0
-    assert dagger.dagger_beta(3, 15) == pytest.approx(0.8)  # imitation's default rampdown of 15 rounds
 
 
 def test_labels_are_the_experts_action_on_the_clean_observation(expert):
@@ -69,9 +66,13 @@ def test_beta_decides_who_acts(expert):
     assert not np.allclose(all_expert["clean_observations"][5], all_learner["clean_observations"][5])
 
 
-def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, tmp_path, expert):
+@pytest.mark.parametrize("beta_rounds, betas", [(None, [2 / 3, 1 / 3, 0.0]),  # beta decays to 0 over --dagger-rounds
+                                                 (2, [0.5, 0.0, 0.0]),  # ... or faster, then stays at 0
+                                                 (15, [14 / 15, 13 / 15, 12 / 15])])  # imitation's default rampdown
+def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, tmp_path, expert, beta_rounds, betas):
     """A seed with 50 labels over 3 rounds; evaluation replaced by a fingerprint of the weights, so
-    the round-0 evaluations show that DAgger starts from exactly the policy bc_oh.py trains."""
+    the round-0 evaluations show that DAgger starts from exactly the policy bc_oh.py trains, and the
+    rounds' records show beta's schedule."""
     def fingerprint(policy, args, episodes, seed, device):
         return [sum(p.double().sum().item() for p in policy.parameters())] * episodes
 
@@ -85,11 +86,11 @@ def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, tmp_pat
     monkeypatch.setattr(bc_oh, "evaluate", fingerprint)
     monkeypatch.setattr(dagger, "collect_round", recorded_collect_round)
     demos = fake_demos(n=256)
-    args = tiny_args(dagger, expert=EXPERT, dagger_samples=50, dagger_rounds=3, dagger_epochs=1)
+    args = tiny_args(dagger, expert=EXPERT, dagger_samples=50, dagger_rounds=3, dagger_epochs=1, dagger_beta_rounds=beta_rounds)
     entry = dagger.train_and_record(args, demos, 1, str(tmp_path))
     assert [r["labels"] for r in entry["rounds"]] == [17, 17, 16]
     assert [r["aggregate"] for r in entry["rounds"]] == [256 + 17, 256 + 34, 256 + 50]
-    assert [r["beta"] for r in entry["rounds"]] == pytest.approx([2 / 3, 1 / 3, 0.0])
+    assert [r["beta"] for r in entry["rounds"]] == pytest.approx(betas)
     data = {key: np.concatenate([round_data[key] for round_data in collected]) for key in collected[0]}
     assert len(data["labels"]) == len(data["inputs"]) == len(data["clean_observations"]) == 50
     assert np.array_equal(data["labels"], expert_on(expert, data["clean_observations"]))
@@ -102,18 +103,19 @@ def test_aggregate_grows_by_the_budget_and_round_0_is_bc_oh(monkeypatch, tmp_pat
 
 
 def test_bad_dagger_settings_are_rejected(tmp_path):
-    assert_usage_error(run_in_process("dagger.py", "--dagger-samples", 3, "--dagger-rounds", 4),
-                       "--dagger-samples 3 is below one label per round of --dagger-rounds 4")
-    for overrides, message in ((dict(dagger_epochs=0), "--dagger-epochs must be positive"),
-                               (dict(dagger_rounds=0), "--dagger-rounds must be positive"),
-                               (dict(dagger_beta_rounds=-1), "--dagger-beta-rounds must be positive"),
-                               (dict(dagger_samples=0, dagger_rounds=1), "--dagger-samples 0 is below one label"),
-                               (dict(expert=str(tmp_path / "none.pt")), f"expert checkpoint {tmp_path / 'none.pt'} not found")):
-        with pytest.raises(dagger.UsageError, match=re.escape(message)):
-            dagger.check_dagger_args(tiny_args(dagger, **{"expert": EXPERT, **overrides}))
-    with pytest.raises(dagger.UsageError, match="not Hopper-v4"):
-        dagger.check_dagger_args(tiny_args(dagger, expert=EXPERT.format(env="Ant-v4")))
-    dagger.check_dagger_args(tiny_args(dagger, expert=EXPERT, dagger_samples=4, dagger_rounds=4))  # one label a round is enough
+    missing = str(tmp_path / "none.pt")
+    for flags, message in ((("--dagger-samples", 3, "--dagger-rounds", 4), "--dagger-samples must be at least --dagger-rounds 4, got 3"),
+                           (("--dagger-samples", 0, "--dagger-rounds", 1), "--dagger-samples must be at least --dagger-rounds 1, got 0"),
+                           (("--dagger-epochs", 0), "--dagger-epochs must be positive, got 0"),
+                           (("--dagger-rounds", 0), "--dagger-rounds must be positive, got 0"),
+                           (("--dagger-beta-rounds", -1), "--dagger-beta-rounds must be positive, got -1")):
+        assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT, *flags), message)
+    # The expert is checked before the demos are loaded.
+    assert_usage_error(run_in_process("dagger.py", "--expert", missing), f"expert checkpoint {missing} not found")
+    assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT.format(env="Ant-v4")), "is an expert for Ant-v4, not Hopper-v4")
+    # One label a round is enough: the run gets past DAgger's checks to the demo file.
+    ok = ("--dagger-samples", 4, "--dagger-rounds", 4, "--demos", str(tmp_path / "none.npz"))
+    assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT, *ok), "none.npz not found")
 
 
 def test_tiny_run_prints_the_summary_and_writes_the_json(tmp_path):
