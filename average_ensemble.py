@@ -462,7 +462,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     print(f"seed {seed} | training", flush=True)
     device = torch.device("cuda" if args.cuda else "cpu")
     evaluations, member_evaluations, policy, ms_per_step = train_seed(args, demos, seed, device)
-    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    # A seed's score is the mean return of its last three evaluations (section 8.3).
     score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
     entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
     # Each member is scored by the same rule, on the same episodes.

@@ -3,7 +3,7 @@
 roll out a beta-mix of expert and learner, aggregate the visited states the expert labels, train on.
 
 The learner sees the noisy observations and their history, as in bc_oh.py; the expert labels each
-state from the clean observation. The labels, 8000 in all ("DAgger 8K"), are split over the rounds.
+state from the clean observation. --dagger-samples labels (8000: DAgger 8K) split over the rounds.
 
     python dagger.py --env Hopper-v4
 """
@@ -73,7 +73,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     expert: str = "experts/{env}.pt"
-    """the expert's checkpoint, queried online to label the states of each round"""
+    """the expert's checkpoint ({env}: the --env), queried online to label each round's states"""
     dagger_samples: int = 8000
     """expert labels over all rounds, split evenly over them (the paper's "DAgger 8K")"""
     dagger_rounds: int = 4
@@ -131,7 +131,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def split_budget(total: int, rounds: int) -> list:
-    """The labels of each round: as even as can be, the first rounds taking the remainder."""
+    """The labels of rounds 1, 2, ...: as even as can be, the first rounds taking the remainder."""
     labels, remainder = divmod(total, rounds)
     return [labels + 1] * remainder + [labels] * (rounds - remainder)
 
@@ -140,7 +140,7 @@ def split_budget(total: int, rounds: int) -> list:
 def collect_round(policy, expert, args, num_labels: int, beta: float, rng, device) -> dict:
     """num_labels steps of the beta-mix: the learner's inputs, the states, the expert's labels."""
     sensor = make_sensor_env(args, int(rng.integers(2**31)))
-    # The sensor's noise is added by hand, so that the env under it returns the clean observation.
+    # Step the env under the sensor: it returns the clean observation, which the sensor then hides.
     env = sensor.env
     low = env.action_space.low
     high = env.action_space.high
@@ -156,7 +156,7 @@ def collect_round(policy, expert, args, num_labels: int, beta: float, rng, devic
             frames = np.concatenate([frames[1:], observed])
         # The expert labels the state from the clean observation: it sees what the sensor hides.
         label = expert(torch.as_tensor(clean, dtype=torch.float32)[None])[0].numpy()
-        # The beta-mix: the expert acts with probability beta, the learner otherwise.
+        # The beta-mix: the expert acts with probability beta (one draw a step), else the learner.
         expert_acts = rng.random() < beta
         action = label
         if not expert_acts:
@@ -204,16 +204,16 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     rounds = []
 
     def aggregate(round_number):
-        # Roll out the beta-mix, label its states, and add them to the data train_step samples.
+        # Roll out the beta-mix, label its states, and rebind train_step's data to hold them too.
         nonlocal inputs, targets
-        # The expert acts with probability beta: 1 in round 0, decaying linearly to 0.
+        # Round 0 is the demos (the expert acting, beta 1); round r rolls out with a lower beta.
         beta_rounds = args.dagger_beta_rounds or args.dagger_rounds
         beta = max(0.0, 1.0 - round_number / beta_rounds)
         num_labels = budget[round_number - 1]
         policy.eval()
         data = collect_round(policy, expert, args, num_labels, beta, rng, device)
         policy.train()
-        # The policy keeps the normaliser of the demos, and the optimizer its state.
+        # Not redone: the policy keeps the demos' normaliser and Adam its moments; the lr restarts.
         inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
         targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
         record = {"round": round_number, "beta": beta, "labels": num_labels}
@@ -230,56 +230,57 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
 def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device, aggregate):
     """The training loop: random minibatches, a linearly decaying learning rate, evaluations."""
-    # Round 0: --epochs epochs on the demos; each later round: --dagger-epochs on the aggregate.
-    epochs = args.epochs + args.dagger_rounds * args.dagger_epochs
+    # Round 0: --epochs on the demos; each round r after it: aggregate(r), then --dagger-epochs.
+    total_epochs = args.epochs + args.dagger_rounds * args.dagger_epochs
     steps_per_epoch = num_samples // args.batch_size
     total_steps = args.epochs * steps_per_epoch
     generator = torch.Generator(device=device).manual_seed(seed)
     evaluations = []
     step = 0
     round_number = 0
-    round_end = args.epochs
-    round_start = 0
+    round_last_epoch = args.epochs
+    round_first_step = 0
     train_time = 0.0
     start = time.time()
-    for epoch in range(1, epochs + 1):
-        if epoch > round_end:
+    for epoch in range(1, total_epochs + 1):
+        if epoch > round_last_epoch:
             round_number += 1
-            round_end += args.dagger_epochs
-            round_start = step
+            round_last_epoch += args.dagger_epochs
+            round_first_step = step
             num_samples = aggregate(round_number)
             steps_per_epoch = num_samples // args.batch_size
+            # The learning rate decays to 0 again, over this round's steps.
             total_steps = args.dagger_epochs * steps_per_epoch
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
             # The learning rate decays linearly to 0 (section 8.3).
             for group in optimizer.param_groups:
-                group["lr"] = args.learning_rate * (1 - (step - round_start) / total_steps)
+                group["lr"] = args.learning_rate * (1 - (step - round_first_step) / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
             loss = train_step(idx)
             step += 1
         # item() waits for the GPU too, so train_time counts the whole training.
         last_loss = loss.item()
         train_time += time.time() - epoch_start
-        evaluating = epoch % args.eval_every == 0 or epoch == round_end
+        evaluating = epoch % args.eval_every == 0 or epoch == round_last_epoch
         if evaluating:
             policy.eval()
             returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
             evaluations.append((epoch, float(np.mean(returns))))
-            # The final learner is evaluated twice more, on other episodes: its score is their mean.
-            if epoch == epochs:
+            # Two more evaluations, on new episodes: the score (the last 3) is the final learner's.
+            if epoch == total_epochs:
                 for repeat in (1, 2):
                     episodes_seed = 10_000 * seed + epoch + repeat * args.eval_episodes
                     returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
                     evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if evaluating or epoch % max(1, epochs // 20) == 0:
+        if evaluating or epoch % max(1, total_epochs // 20) == 0:
             last_return = "n/a"
             if evaluations:
                 last_return = f"{evaluations[-1][1]:.1f}"
             ms_per_step = 1000 * train_time / step
-            minutes_left = (time.time() - start) / epoch * (epochs - epoch) / 60
-            progress = f"seed {seed} | round {round_number} | epoch {epoch}/{epochs}"
+            minutes_left = (time.time() - start) / epoch * (total_epochs - epoch) / 60
+            progress = f"seed {seed} | round {round_number} | epoch {epoch}/{total_epochs}"
             progress += f" | loss {last_loss:.5f}"
             progress += f" | last eval {last_return} | {ms_per_step:.2f} ms/step"
             print(f"{progress} | {minutes_left:.1f} min left", flush=True)
@@ -554,7 +555,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     print(f"seed {seed} | training", flush=True)
     device = torch.device("cuda" if args.cuda else "cpu")
     evaluations, policy, ms_per_step, rounds = train_seed(args, demos, seed, device)
-    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    # A seed's score is the mean return of its last three evaluations (section 8.3).
     score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
     entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
     # Round 0 is bc_oh.py's training: its score, as bc_oh.py scores it.

@@ -117,7 +117,7 @@ class Policy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         # G, the authors' Generator: 3 x [Linear (the first without bias), BatchNorm, LeakyReLU],
-        # then a Linear to e. BatchNorm bounds e's scale, which G would inflate to raise D's error.
+        # then a Linear to e (their gan_mlp.py).
         blocks = []
         for i, in_dim in enumerate([obs_dim * history, hidden, hidden]):
             linear = nn.Linear(in_dim, hidden, bias=i > 0)
@@ -162,7 +162,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:
-    """Row t holds a_{t-1}; at an episode's start a_t itself, so D has nothing to remove there."""
+    """Row t holds a_{t-1} (stack_history's [a_{t-1}, a_t]); at an episode's start, a_t."""
     pairs = stack_history(actions, episode_starts, 2)
     return pairs[:, : actions.shape[1]]
 
@@ -178,7 +178,7 @@ def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> t
     return loss.detach()
 
 
-def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):
+def encoder_head_step(policy: Policy, optimizer, embedding, actions, previous, weight: float):
     """One step of G and F on MSE(F(e), a_t) - w * MSE(D(e, a_t), a_{t-1}); both losses."""
     bc_loss = F.mse_loss(policy.head(embedding), actions)
     prediction = policy.predict_previous_action(embedding, actions)
@@ -186,8 +186,8 @@ def encoder_policy_step(policy: Policy, optimizer, embedding, actions, previous,
     optimizer.zero_grad()
     # Fit a_t while making a_{t-1} hard to predict for the current D.
     (bc_loss - weight * adversary_loss).backward()
-    # D stays as it is: this step moves G and F only.
-    policy.adversary.zero_grad()
+    # D stays as it is: its grads become None, which Adam skips (a zero grad would still move it).
+    policy.adversary.zero_grad(set_to_none=True)
     optimizer.step()
     return bc_loss.detach(), adversary_loss.detach()
 
@@ -235,11 +235,11 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 
     def train_step(idx):
         # The authors' alternating updates: first D, then G and F (no gradient reversal).
-        # G runs once a step, so BatchNorm's running statistics move once a step.
+        # One forward pass of G feeds both updates: BatchNorm's statistics move once a step.
         embedding = policy.embed(inputs[idx])
         actions = targets[idx]
         adversary_loss = adversary_step(policy, optimizer, embedding, actions, previous[idx])
-        loss, _ = encoder_policy_step(policy, optimizer, embedding, actions, previous[idx], weight)
+        loss, _ = encoder_head_step(policy, optimizer, embedding, actions, previous[idx], weight)
         return loss, adversary_loss
 
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
@@ -515,7 +515,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     print(f"seed {seed} | training", flush=True)
     device = torch.device("cuda" if args.cuda else "cpu")
     evaluations, policy, ms_per_step = train_seed(args, demos, seed, device)
-    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    # A seed's score is the mean return of its last three evaluations (section 8.3).
     score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
     entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
     if args.save_model:

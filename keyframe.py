@@ -3,7 +3,7 @@
 predicts a_t from the previous actions errs most.
 
 Those are the moments where the expert's action changes: the ones a copycat policy misses. As the
-authors do, the action-prediction model is trained once, before the policy; the samples with the
+authors do, the action-prediction model is trained first (once a seed); the samples with the
 top 10% of its error (APE) weigh 5 in the behavioural-cloning loss, all others 1.
 
     python keyframe.py --env Hopper-v4
@@ -75,7 +75,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     keyframe_k: int = 4
-    """K, the previous actions the action-prediction model sees (authors' CARLA code: 9)"""
+    """K, the previous actions the action-prediction model sees (CARLA 9, MuJoCo unpublished)"""
     keyframe_spacing: int = 1
     """steps between those actions: a_{t-Ks}, ..., a_{t-2s}, a_{t-s} (authors' CARLA code: 3)"""
     keyframe_fraction: float = 0.1
@@ -159,8 +159,9 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
         loss = F.mse_loss(model(inputs[idx]), targets[idx])
         loss.backward()
         optimizer.step()
-    # The squared error of each sample, summed over the action's entries.
-    return ((model(inputs) - targets) ** 2).sum(1).detach()
+    # The squared error of each sample, summed over the action's entries; no gradient needed.
+    with torch.no_grad():
+        return ((model(inputs) - targets) ** 2).sum(1)
 
 
 def keyframes(ape: torch.Tensor, fraction: float) -> torch.Tensor:
@@ -190,7 +191,7 @@ def changepoints(actions: np.ndarray, episode_starts: np.ndarray, fraction=0.1) 
     return np.isin(np.arange(len(actions)), top)
 
 
-def train_seed(args, demos: dict, seed: int, device) -> dict:
+def train_seed(args, demos: dict, seed: int, device) -> tuple:
     """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
     torch.manual_seed(seed)
     env = make_env(args.env)
@@ -198,9 +199,8 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     act_dim = env.action_space.shape[0]
     # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
-    noisy = partially_observe(
-        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
-    )
+    observations = demos["observations"]
+    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
@@ -212,7 +212,7 @@ def train_seed(args, demos: dict, seed: int, device) -> dict:
     epochs = args.keyframe_model_epochs
     ape = action_prediction_errors(actions, starts, k, spacing, epochs, args.batch_size, device)
     weights = keyframe_weights(ape, args.keyframe_fraction, args.keyframe_weight)
-    # How many keyframes sit on the largest action changes, the moments a copycat misses.
+    # Printed only: how many keyframes sit on the largest action changes (a copycat misses them).
     is_key = keyframes(ape, args.keyframe_fraction).cpu().numpy()
     at_change = changepoints(actions, starts)
     found = f"{is_key.sum()} of {len(is_key)} samples"
@@ -503,7 +503,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     print(f"seed {seed} | training", flush=True)
     device = torch.device("cuda" if args.cuda else "cpu")
     evaluations, policy, ms_per_step = train_seed(args, demos, seed, device)
-    # A seed's score is the mean return of its last three evaluations (section 5.1).
+    # A seed's score is the mean return of its last three evaluations (section 8.3).
     score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
     entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
     if args.save_model:

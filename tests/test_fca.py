@@ -68,7 +68,7 @@ def test_encoder_step_raises_the_adversary_loss_and_adversary_step_lowers_it(see
     before = adversary_loss(policy, history, action, previous)
 
     adversary_weights = snapshot(policy.adversary)
-    bc, adversary = fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=2.0)
+    bc, adversary = fca.encoder_head_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=2.0)
     assert adversary.item() == pytest.approx(before), "the returned adversary loss is the one before the step"
     assert unchanged(policy.adversary, adversary_weights), "the encoder+policy step must not move D"
     after_encoder = adversary_loss(policy, history, action, previous)
@@ -86,7 +86,7 @@ def test_adversary_weight_zero_is_plain_bc_on_the_fca_network():
     policy = small_policy()
     history, action, previous = batch()
     policy_optimizer, _ = optimizers(policy)
-    bc_before, _ = fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=0.0)
+    bc_before, _ = fca.encoder_head_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=0.0)
     with torch.no_grad():
         assert ((policy(history) - action) ** 2).mean() < bc_before
 
@@ -128,7 +128,7 @@ def test_batchnorm_is_frozen_at_evaluation_and_a_reloaded_model_acts_the_same():
     policy_optimizer, adversary_optimizer = optimizers(policy)
     for seed in range(3):
         history, action, previous = batch(seed)
-        fca.encoder_policy_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=1.0)
+        fca.encoder_head_step(policy, policy_optimizer, policy.embed(history), action, previous, weight=1.0)
     trained = stats()
     assert not any(torch.equal(a, b) for a, b in zip(before, trained)), "a training step moves the running statistics"
     policy.eval()
