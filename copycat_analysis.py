@@ -272,7 +272,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
-    # The paper's demo sizes (section 5.1): 20k steps for Hopper, 10k for the others.
+    # Demo sizes of section 8.3: 20k steps for Hopper, 10k for Ant and Walker2d (and others).
     paper_n = 10000
     if args.env.startswith("Hopper"):
         paper_n = 20000
@@ -338,13 +338,13 @@ def load_demos(args, env: gym.Env) -> tuple:
     actions = actions[:take]
     starts = starts[:take]
     for key, values in [("observations", obs), ("actions", actions)]:
-        bad_rows = np.unique(np.argwhere(~np.isfinite(values))[:, 0])
+        bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
         if len(bad_rows):
             rows = bad_rows[:3].tolist()
             raise UsageError(f"{path}: {key} hold non-finite values at rows {rows}: fix them")
     low = env.action_space.low
     high = env.action_space.high
-    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
+    outside = np.flatnonzero(((actions < low) | (actions > high)).any(axis=1))
     if len(outside):
         bounds = f"[{low.min():g}, {high.max():g}]"
         rows = outside[:3].tolist()
@@ -352,8 +352,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
-    # How well copying the last action imitates the expert: MSE(a_{t-1}, a_t) within episodes,
-    # divided by Var(a). It is 0 if actions never change, about 2 if they are unrelated.
+    # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
+    # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
     note = ""
@@ -403,7 +403,7 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
 
 # Copied from bc_oh.partially_observe
 def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """What the sensor shows of the demos: the same noise, drawn once per sample."""
+    """The sensor's noise on the demos: the same law, drawn once from seed, fixed for all epochs."""
     observed = observations.copy()
     rng = np.random.default_rng(seed)
     if hide:
@@ -415,11 +415,11 @@ def partially_observe(observations, dims: list, std: float, hide: bool, seed: in
 
 # Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t holds [o_{t-H+1}, ..., o_t]; before an episode's start, its first frame repeated."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []
-    for lag in range(history - 1, -1, -1):
+    for lag in reversed(range(history)):
         frames.append(observations[np.maximum(index - lag, first_of_episode)])
     return np.concatenate(frames, axis=1)
 
@@ -437,7 +437,7 @@ def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
 
 # Copied from bc_oh.Normalizer
 class Normalizer(nn.Module):
-    """Standardises inputs with statistics of the training inputs, saved with the model."""
+    """Standardises each entry by the training inputs' mean and std (at least 1e-6), saved."""
 
     def __init__(self, inputs: torch.Tensor):
         super().__init__()

@@ -33,7 +33,7 @@ LOSS = "MSE to the expert's actions"
 class Args:
     """History-Dropout: BC-OH with dropout on the past frames, on MuJoCo (paper Table 2)."""
 
-    exp_name: str = os.path.basename(__file__)[: -len(".py")]
+    exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id with its version (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
@@ -52,9 +52,9 @@ class Args:
     hide_velocities: bool = False
     """set the velocity entries to zero instead of adding noise (positions only)"""
     history: int = 2
-    """frames in the observation history"""
+    """frames H in the observation history, o_t included"""
     epochs: int = 1000
-    """passes over the demonstrations, in minibatches drawn with replacement"""
+    """epochs of N // batch_size minibatches, each drawn uniformly with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: float | None = None
@@ -79,7 +79,7 @@ class Args:
             raise UsageError(f"--history-dropout must lie in [0, 1), got {self.history_dropout}")
 
 
-# ---- The method: BC-OH's network, loss and training loop ----
+# ---- The method: the network, its loss and the training loop ----
 # Copied from bc_oh.mlp..Normalizer
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
     """The paper's three-layer MLP (section 8.3)."""
@@ -88,7 +88,7 @@ def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
 
 
 class Normalizer(nn.Module):
-    """Standardises inputs with statistics of the training inputs, saved with the model."""
+    """Standardises each entry by the training inputs' mean and std (at least 1e-6), saved."""
 
     def __init__(self, inputs: torch.Tensor):
         super().__init__()
@@ -123,11 +123,11 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 
 # Copied from bc_oh.stack_history..run
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t holds [o_{t-H+1}, ..., o_t]; before an episode's start, its first frame repeated."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []
-    for lag in range(history - 1, -1, -1):
+    for lag in reversed(range(history)):
         frames.append(observations[np.maximum(index - lag, first_of_episode)])
     return np.concatenate(frames, axis=1)
 
@@ -178,7 +178,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
             loss = train_step(idx)
             step += 1
-        # item() waits for the GPU too, so train_time counts the whole training.
+        # The epoch's last minibatch loss; item() waits for the GPU, so train_time counts it all.
         last_loss = loss.item()
         train_time += time.time() - epoch_start
         evaluating = epoch % args.eval_every == 0 or epoch == args.epochs
@@ -202,7 +202,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # ---- Evaluation ----
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """The returns of the deterministic policy, one episode on each of `episodes` noisy envs."""
+    """The deterministic policy's returns, one episode an env; env i (start, noise) has seed + i."""
     env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
@@ -295,7 +295,7 @@ def make_sensor_env(args, seed: int) -> gym.Env:
 
 
 def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """What the sensor shows of the demos: the same noise, drawn once per sample."""
+    """The sensor's noise on the demos: the same law, drawn once from seed, fixed for all epochs."""
     observed = observations.copy()
     rng = np.random.default_rng(seed)
     if hide:
@@ -311,7 +311,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+# At import, so that spawned workers get it too: the v4 envs' deprecation warnings stay quiet.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -322,7 +322,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
-    # The paper's demo sizes (section 5.1): 20k steps for Hopper, 10k for the others.
+    # Demo sizes of section 8.3: 20k steps for Hopper, 10k for Ant and Walker2d (and others).
     paper_n = 10000
     if args.env.startswith("Hopper"):
         paper_n = 20000
@@ -388,13 +388,13 @@ def load_demos(args, env: gym.Env) -> tuple:
     actions = actions[:take]
     starts = starts[:take]
     for key, values in [("observations", obs), ("actions", actions)]:
-        bad_rows = np.unique(np.argwhere(~np.isfinite(values))[:, 0])
+        bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
         if len(bad_rows):
             rows = bad_rows[:3].tolist()
             raise UsageError(f"{path}: {key} hold non-finite values at rows {rows}: fix them")
     low = env.action_space.low
     high = env.action_space.high
-    outside = np.unique(np.argwhere((actions < low) | (actions > high))[:, 0])
+    outside = np.flatnonzero(((actions < low) | (actions > high)).any(axis=1))
     if len(outside):
         bounds = f"[{low.min():g}, {high.max():g}]"
         rows = outside[:3].tolist()
@@ -402,8 +402,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
-    # How well copying the last action imitates the expert: MSE(a_{t-1}, a_t) within episodes,
-    # divided by Var(a). It is 0 if actions never change, about 2 if they are unrelated.
+    # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
+    # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
     note = ""
@@ -476,13 +476,13 @@ def run(args):
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
 
+    # Bad env ids and frame skips fail here, not in a worker; the results record the defaults.
     env = make_env(args.env)
     velocity_dims(env, args.env)
-    # Fill in the per-env defaults, so that the results record them.
     if args.frame_skip is None:
         args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
     make_env(args.env, args.frame_skip)
-    # The paper's learning rates (section 8.3): 1e-5 for Hopper, 1e-4 for the others.
+    # Learning rates of section 8.3: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (and others).
     if args.learning_rate is None:
         args.learning_rate = 1e-4
         if args.env.startswith("Hopper"):
