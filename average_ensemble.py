@@ -1,6 +1,6 @@
 # Average-Ensemble of BC-SO and BC-OH (paper section 5.1, Table 2); see README.md
 """Average-Ensemble: each seed trains a BC-SO policy (the current frame o_t) and a BC-OH policy
-(the last H frames), and acts with the mean of their actions.
+(the last H frames), and acts with the mean of their raw actions, clipped after.
 
 BC-SO cannot copy the previous action a_{t-1} but misses what the history reveals; BC-OH sees the
 history but learns to copy: the mean hedges the two. Each member is reported too.
@@ -108,7 +108,7 @@ class Policy(nn.Module):
 
 # Copied from bc_so.Policy with Policy->CurrentFramePolicy
 class CurrentFramePolicy(nn.Module):
-    """BC-SO: only o_t, the last obs_dim entries of the history, goes into one MLP."""
+    """BC-SO: only o_t, the history's last obs_dim entries, goes into one MLP (`history` unused)."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
@@ -163,9 +163,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     act_dim = env.action_space.shape[0]
     # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
-    noisy = partially_observe(
-        demos["observations"], dims, args.obs_noise_std, args.hide_velocities, seed
-    )
+    observations = demos["observations"]
+    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
     history = stack_history(noisy, demos["episode_starts"], args.history)
     inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
@@ -218,7 +217,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             policy.eval()
             returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
             evaluations.append((epoch, float(np.mean(returns))))
-            # Each member plays the same episodes alone.
+            # Each member alone, from the same env seeds (starts, sensor noise) as the ensemble.
             for name, member in policy.members.items():
                 returns = evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)
                 member_evaluations[name].append((epoch, float(np.mean(returns))))
@@ -465,7 +464,7 @@ def train_and_record(args, demos: dict, seed: int, output_dir: str) -> dict:
     # A seed's score is the mean return of its last three evaluations (section 8.3).
     score = float(np.mean([mean_return for _, mean_return in evaluations[-3:]]))
     entry = {"score": score, "evaluations": evaluations, "ms_per_step": ms_per_step}
-    # Each member is scored by the same rule, on the same episodes.
+    # Each member is scored by the same rule, from the same env seeds.
     entry["members"] = {}
     for name, member_evals in member_evaluations.items():
         member_score = float(np.mean([mean_return for _, mean_return in member_evals[-3:]]))

@@ -1,7 +1,7 @@
 # Behavioural cloning from a single observation, BC-SO (paper section 5.1, Table 2); see README.md
 """BC-SO: an MLP maps the current partially observed frame o_t alone to the expert's action a_t.
 
-Without a history it cannot infer a_{t-1} to copy, nor see through the velocity noise. It is
+Without a history it cannot infer a_{t-1} to copy, nor velocities from successive positions. It is
 c2f.py's coarse model; --history changes nothing.
 
     python bc_so.py --env Hopper-v4
@@ -94,7 +94,7 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """BC-SO: only o_t, the last obs_dim entries of the history, goes into one MLP."""
+    """BC-SO: only o_t, the history's last obs_dim entries, goes into one MLP (`history` unused)."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()

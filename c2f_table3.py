@@ -1,17 +1,18 @@
-# C2F's ablations (paper Table 3, section 5.3) and the capacity control; see README.md
+# C2F's ablations (paper Table 3, section 5.3: CARLA there) and a capacity control; see README.md
 """c2f.py with the choices of Table 3 open, each flag an ablation of one part of C2F. At its
 defaults this file is c2f.py: the same model, the same weights, the same printed digits.
 
-    --fusion              where sg(zeta) joins the policy model: late, into the last layer (the
-                          paper's); output, into a layer after pi_theta's action-sized output;
-                          middle, into pi_theta's second layer; early, beside the input frames;
-                          penultimate, into the last layer of BC-OH's two-hidden-layer MLP
-    --coarse-output       feature: the coarse model passes on its last hidden feature, not zeta
-    --coarse-input        history: the coarse model reads the whole history (BC-OH as pi_phi)
-    --policy-input        current: the policy model reads only o_t (BC-SO as pi_theta)
+    --fusion              where sg(zeta) joins the policy model: late, into the last layer (c2f.py's
+                          reading of the paper); middle, into pi_theta's second layer; early, beside
+                          the input frames (Table 3's); output and penultimate, two other readings
+                          (section 8.3: "to the output of policy model"; 5.1: "penultimate FC")
+    --coarse-output       feature: the coarse model's last hidden feature ("ResNet output as zeta")
+    --coarse-input        history: the coarse model reads the whole history ("BC-OH as pi_phi,
+                          BC-OH as pi_theta"; with --policy-input current, "..., BC-SO as pi_theta")
+    --policy-input        current: the policy model reads only o_t
     --no-stop-gradient    the final action's loss trains the coarse model too
     --two-stage           train the coarse model alone first, freeze it, then train the rest
-    --no-coarse-action    the capacity control: zeros in place of sg(zeta), and no coarse loss
+    --no-coarse-action    a capacity control, not the paper's: zeros for sg(zeta), no coarse loss
 
     python c2f_table3.py --env Hopper-v4 --fusion early --hide-velocities
 """
@@ -36,7 +37,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f_table3"
-LOSS = "Eq. 2, or the one term --two-stage or --no-coarse-action trains"
+LOSS = "Eq. 2; --two-stage: zeta's MSE, then the final action's; --no-coarse-action: the final's"
 
 
 @dataclass
@@ -92,7 +93,7 @@ class Args:
     stop_gradient: bool = True
     """stop the final loss's gradient at zeta (the paper's); no: it trains the coarse model too"""
     coarse_action: bool = True
-    """feed sg(zeta) to the policy model; no: zeros and no coarse loss (the capacity control)"""
+    """feed sg(zeta) to the policy model; no: zeros and no coarse loss (a capacity control)"""
     two_stage: bool = False
     """train the coarse model alone for --epochs and freeze it, then the rest for --epochs"""
 
@@ -125,52 +126,51 @@ class Policy(nn.Module):
         self.normalize = Normalizer(inputs)
         self.args = args
         hidden = args.hidden
-        # --coarse-input and --policy-input: each model reads the history, or its last frame o_t.
-        self.coarse_width = obs_dim
+        # Each model reads the last *_in_dim entries of [o_{t-H+1}, ..., o_t]: o_t, or them all.
+        self.coarse_in_dim = obs_dim
         if args.coarse_input == "history":
-            self.coarse_width = obs_dim * args.history
-        self.policy_width = obs_dim * args.history
+            self.coarse_in_dim = obs_dim * args.history
+        self.policy_in_dim = obs_dim * args.history
         if args.policy_input == "current":
-            self.policy_width = obs_dim
-        # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
-        self.coarse = mlp(self.coarse_width, act_dim, hidden)
+            self.policy_in_dim = obs_dim
+        # The coarse model pi_phi: an MLP on o_t (as BC-SO), or on the history; it outputs zeta.
+        self.coarse = mlp(self.coarse_in_dim, act_dim, hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
-        fed = act_dim
+        fed_dim = act_dim
         if args.coarse_output == "feature":
-            fed = hidden
-        # The policy model pi_theta: three layers on the whole history, split after the first.
-        # --fusion early and middle: sg(zeta) joins the input of its first or second layer.
-        first_in = self.policy_width
+            fed_dim = hidden
+        # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
+        first_in = self.policy_in_dim
         if args.fusion == "early":
-            first_in += fed
+            first_in += fed_dim
         self.policy_first = nn.Sequential(nn.Linear(first_in, hidden), nn.ReLU())
         second_in = hidden
         if args.fusion == "middle":
-            second_in += fed
+            second_in += fed_dim
         layers = [nn.Linear(second_in, hidden), nn.ReLU()]
+        # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
         if args.fusion == "output":
-            # pi_theta is BC-OH's MLP: it ends in an action, without a ReLU.
             layers.append(nn.Linear(hidden, act_dim))
         elif args.fusion != "penultimate":
             layers += [nn.Linear(hidden, hidden), nn.ReLU()]
-        # --fusion penultimate: two layers, so with the head pi_theta is BC-OH's MLP.
         self.policy_rest = nn.Sequential(*layers)
-        # One more fully-connected layer maps [pi_theta's feature, sg(zeta)] to the final action.
+        # One more fully-connected layer maps pi_theta's output (and sg(zeta) if fused late) to a_t.
         head_in = hidden
         if args.fusion == "output":
             head_in = act_dim
         if args.fusion in ("late", "output", "penultimate"):
-            head_in += fed
+            head_in += fed_dim
         self.head = nn.Linear(head_in, act_dim)
 
     def coarse_model(self, obs_history):
-        """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
-        coarse_feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
+        """zeta = pi_phi(o_t, or the history), and the coarse model's last hidden feature."""
+        coarse_input = self.normalize(obs_history)[:, -self.coarse_in_dim :]
+        coarse_feature = self.coarse[:-1](coarse_input)
         zeta = self.coarse[-1](coarse_feature)
         return zeta, coarse_feature
 
     def coarse_and_final(self, obs_history):
-        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
+        """zeta and the final action: what Eq. 2 (or the loss the flags choose) trains."""
         args = self.args
         zeta, coarse_feature = self.coarse_model(obs_history)
         fed = zeta
@@ -182,7 +182,7 @@ class Policy(nn.Module):
         # The capacity control: zeros in place of sg(zeta), no coarse information for pi_theta.
         if not args.coarse_action:
             fed = torch.zeros_like(fed)
-        h = self.normalize(obs_history)[:, -self.policy_width :]
+        h = self.normalize(obs_history)[:, -self.policy_in_dim :]
         if args.fusion == "early":
             h = torch.cat([h, fed], dim=1)
         h = self.policy_first(h)
@@ -259,7 +259,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         # One Adam for both stages: it steps only the parameters that have a gradient.
         policy.coarse.requires_grad_(False)
         print(f"seed {seed} | stage 2: the coarse model frozen, the rest trained", flush=True)
-        # Stage 2 is the training loop below, on the final loss.
+        # Stage 2: the loop below on the final loss (stage 1's minibatches again, the lr anew).
         train_step = functools.partial(train_step, stage="final")
     evaluations, ms_per_step = fit(args, policy, optimizer, train_step, len(inputs), seed, device)
     return evaluations, policy, ms_per_step

@@ -450,7 +450,7 @@ class Normalizer(nn.Module):
 
 # Copied from bc_so.Policy with Policy->SOPolicy
 class SOPolicy(nn.Module):
-    """BC-SO: only o_t, the last obs_dim entries of the history, goes into one MLP."""
+    """BC-SO: only o_t, the history's last obs_dim entries, goes into one MLP (`history` unused)."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
@@ -484,52 +484,51 @@ class C2FPolicy(nn.Module):
         self.normalize = Normalizer(inputs)
         self.args = args
         hidden = args.hidden
-        # --coarse-input and --policy-input: each model reads the history, or its last frame o_t.
-        self.coarse_width = obs_dim
+        # Each model reads the last *_in_dim entries of [o_{t-H+1}, ..., o_t]: o_t, or them all.
+        self.coarse_in_dim = obs_dim
         if args.coarse_input == "history":
-            self.coarse_width = obs_dim * args.history
-        self.policy_width = obs_dim * args.history
+            self.coarse_in_dim = obs_dim * args.history
+        self.policy_in_dim = obs_dim * args.history
         if args.policy_input == "current":
-            self.policy_width = obs_dim
-        # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
-        self.coarse = mlp(self.coarse_width, act_dim, hidden)
+            self.policy_in_dim = obs_dim
+        # The coarse model pi_phi: an MLP on o_t (as BC-SO), or on the history; it outputs zeta.
+        self.coarse = mlp(self.coarse_in_dim, act_dim, hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
-        fed = act_dim
+        fed_dim = act_dim
         if args.coarse_output == "feature":
-            fed = hidden
-        # The policy model pi_theta: three layers on the whole history, split after the first.
-        # --fusion early and middle: sg(zeta) joins the input of its first or second layer.
-        first_in = self.policy_width
+            fed_dim = hidden
+        # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
+        first_in = self.policy_in_dim
         if args.fusion == "early":
-            first_in += fed
+            first_in += fed_dim
         self.policy_first = nn.Sequential(nn.Linear(first_in, hidden), nn.ReLU())
         second_in = hidden
         if args.fusion == "middle":
-            second_in += fed
+            second_in += fed_dim
         layers = [nn.Linear(second_in, hidden), nn.ReLU()]
+        # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
         if args.fusion == "output":
-            # pi_theta is BC-OH's MLP: it ends in an action, without a ReLU.
             layers.append(nn.Linear(hidden, act_dim))
         elif args.fusion != "penultimate":
             layers += [nn.Linear(hidden, hidden), nn.ReLU()]
-        # --fusion penultimate: two layers, so with the head pi_theta is BC-OH's MLP.
         self.policy_rest = nn.Sequential(*layers)
-        # One more fully-connected layer maps [pi_theta's feature, sg(zeta)] to the final action.
+        # One more fully-connected layer maps pi_theta's output (and sg(zeta) if fused late) to a_t.
         head_in = hidden
         if args.fusion == "output":
             head_in = act_dim
         if args.fusion in ("late", "output", "penultimate"):
-            head_in += fed
+            head_in += fed_dim
         self.head = nn.Linear(head_in, act_dim)
 
     def coarse_model(self, obs_history):
-        """zeta = pi_phi(o_t), and the coarse model's last hidden feature."""
-        coarse_feature = self.coarse[:-1](self.normalize(obs_history)[:, -self.coarse_width :])
+        """zeta = pi_phi(o_t, or the history), and the coarse model's last hidden feature."""
+        coarse_input = self.normalize(obs_history)[:, -self.coarse_in_dim :]
+        coarse_feature = self.coarse[:-1](coarse_input)
         zeta = self.coarse[-1](coarse_feature)
         return zeta, coarse_feature
 
     def coarse_and_final(self, obs_history):
-        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
+        """zeta and the final action: what Eq. 2 (or the loss the flags choose) trains."""
         args = self.args
         zeta, coarse_feature = self.coarse_model(obs_history)
         fed = zeta
@@ -541,7 +540,7 @@ class C2FPolicy(nn.Module):
         # The capacity control: zeros in place of sg(zeta), no coarse information for pi_theta.
         if not args.coarse_action:
             fed = torch.zeros_like(fed)
-        h = self.normalize(obs_history)[:, -self.policy_width :]
+        h = self.normalize(obs_history)[:, -self.policy_in_dim :]
         if args.fusion == "early":
             h = torch.cat([h, fed], dim=1)
         h = self.policy_first(h)

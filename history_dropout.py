@@ -1,8 +1,8 @@
 # History-Dropout of ChauffeurNet (Bansal et al. 2019) as the paper runs it (Table 2); see README.md
 """History-Dropout: BC-OH with a Dropout layer on the past frames of the history, never on o_t.
 
-Training zeroes each normalised entry of [o_{t-H+1}, ..., o_{t-1}] with probability
---history-dropout (torch's Dropout), so copying a_{t-1} from the history is less reliable.
+Training zeroes each normalised entry of [o_{t-H+1}, ..., o_{t-1}] with probability p =
+--history-dropout and scales the rest by 1/(1-p) (torch's Dropout): copying a_{t-1} is less sure.
 
     python history_dropout.py --env Hopper-v4
 """
@@ -72,7 +72,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     history_dropout: float = 0.5
-    """dropout rate on the past frames in training, in [0, 1) (ChauffeurNet's 0.5; 0: BC-OH)"""
+    """dropout rate of each past frame's entries in training, in [0, 1) (0: BC-OH)"""
 
     def __post_init__(self):
         if not 0 <= self.history_dropout < 1:
@@ -105,7 +105,7 @@ class Policy(nn.Module):
     def __init__(self, obs_dim, act_dim, history, hidden, rate, inputs):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        # The first (H - 1) * obs_dim entries are the past frames; Dropout acts in train() only.
+        # The first (H - 1) * obs_dim entries are the past frames; Dropout is off after eval().
         self.past = (history - 1) * obs_dim
         self.dropout = nn.Dropout(rate)
         self.net = mlp(obs_dim * history, act_dim, hidden)

@@ -50,7 +50,7 @@ CEILINGS = {
     "c2f": 556,
     "fca": 634,
     "keyframe": 626,
-    "average_ensemble": 608,
+    "average_ensemble": 607,
     "dagger": 685,
     "c2f_table3": 651,
     "expert_ppo": 700,
