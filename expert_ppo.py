@@ -44,9 +44,9 @@ class Args:
     frame_skip: int | None = None
     """simulator steps per action; None: the env's own (see docs/methods.md)"""
     seed: int = 1
-    """seed of the run (python, numpy, torch and the envs): one PPO run trains one seed"""
+    """training seed (python, numpy, torch, envs); demos use seed 0, final evaluations 10000+"""
     total_timesteps: int = 3_000_000
-    """env steps to train for, summed over the parallel envs"""
+    """env steps to train for, summed over the parallel envs, rounded up to whole rollouts"""
     learning_rate: float = 3e-4
     """Adam learning rate, annealed linearly to zero over total-timesteps"""
     num_envs: int = 8
@@ -72,7 +72,7 @@ class Args:
     hidden: int = 64
     """width of the two tanh hidden layers of actor and critic"""
     output_dir: str = "runs/expert_ppo/{env}__{seed}{rate}"
-    """where training writes latest.pt and best.pt; {rate} is _fsK at --frame-skip K"""
+    """where latest.pt and best.pt go; {rate}: _fsK at a --frame-skip K other than the env's"""
     save_every_steps: int = 100_000
     """write latest.pt every this many env steps"""
     eval_every_steps: int = 250_000
@@ -84,11 +84,11 @@ class Args:
     max_minutes: float = 0.0
     """stop cleanly (checkpoint written) after this many minutes; 0 = no limit. Resume later."""
     threads: int = 1
-    """torch CPU threads; 1 is fastest for these small networks"""
+    """torch CPU threads for training (--make-demos uses 1); 1 is fastest for small networks"""
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """checkpoint of --eval-only and --make-demos, run at the frame skip it was trained at"""
+    """expert of --eval-only (run at its training frame skip) and --make-demos (at --frame-skip)"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
@@ -150,7 +150,7 @@ def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:
 
 
 class RunningMeanStd:
-    """Running mean and variance (parallel algorithm of Chan et al.), as gymnasium's normalisers."""
+    """Running mean and variance (Chan et al.), one for all envs; normalize() clips to +-10."""
 
     def __init__(self, shape=()):
         self.mean = np.zeros(shape)
@@ -446,7 +446,7 @@ def make_demos(args: Args):
 
 # ---- Training ----
 def validate(args: Args):
-    # `not value > 0` also refuses a NaN.
+    # require(value > 0) refuses a NaN too: NaN > 0 is False.
     positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden"
     positive += " save_every_steps eval_every_steps train_eval_episodes eval_episodes threads"
     positive += " learning_rate clip_coef max_grad_norm"
@@ -454,8 +454,8 @@ def validate(args: Args):
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
         require(value > 0, f"{flag} must be positive, got {value}")
-    require(0 < args.gamma <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
-    require(0 <= args.gae_lambda <= 1, "--gamma must be in (0, 1] and --gae-lambda in [0, 1]")
+    require(0 < args.gamma <= 1, f"--gamma must be in (0, 1], got {args.gamma}")
+    require(0 <= args.gae_lambda <= 1, f"--gae-lambda must be in [0, 1], got {args.gae_lambda}")
     divides = (args.num_envs * args.num_steps) % args.num_minibatches == 0
     require(divides, "--num-minibatches must divide num-envs * num-steps")
 
@@ -501,9 +501,9 @@ def train(args: Args):
         require(trained_on == args.env, f"{other}: use another --output-dir")
         # Another rate is another task (other dynamics, other horizon): continuing would mix them.
         trained_at = state.get("frame_skip", native)
-        rate = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
+        mismatch = f"{latest_path} was trained at frame skip {trained_at}, not {args.frame_skip}"
         fix = f"pass --frame-skip {trained_at} or use another --output-dir"
-        require(trained_at == args.frame_skip, f"{rate}: {fix}")
+        require(trained_at == args.frame_skip, f"{mismatch}: {fix}")
         try:
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
@@ -565,7 +565,7 @@ def train(args: Args):
 
     # A resumed run gets fresh episodes.
     raw_obs, _ = envs.reset(seed=args.seed + global_step)
-    # The discounted return of each env, for reward scaling as gymnasium's NormalizeReward.
+    # Each env's discounted return, to scale rewards as NormalizeReward does (reset at any end).
     discounted_return = np.zeros(args.num_envs)
     episode_return = np.zeros(args.num_envs)
     recent_returns = []
@@ -575,7 +575,7 @@ def train(args: Args):
     next_eval = global_step + args.eval_every_steps
 
     while global_step < args.total_timesteps:
-        frac = max(1.0 - global_step / args.total_timesteps, 0.0)
+        frac = 1.0 - global_step / args.total_timesteps
         optimizer.param_groups[0]["lr"] = args.learning_rate * frac
 
         # ---- Rollout (it and the advantage estimation below need no gradients)
@@ -603,7 +603,8 @@ def train(args: Args):
                 for i in np.flatnonzero(done):
                     recent_returns.append(episode_return[i])
                     recent_returns = recent_returns[-20:]
-                    episode_return[i], discounted_return[i] = 0.0, 0.0
+                    episode_return[i] = 0.0
+                    discounted_return[i] = 0.0
 
                 obs_buf[step] = obs
                 act_buf[step] = action
@@ -624,7 +625,7 @@ def train(args: Args):
                 advantages[t] = last_gae
             returns = advantages + val_buf
 
-        # ---- PPO update: the clipped surrogate objective (PPO paper, Eq. 7) and the value loss
+        # ---- PPO update: clipped surrogate (PPO Eq. 7), value loss (unclipped; CleanRL clips)
         b_obs = obs_buf.reshape(-1, obs_dim)
         b_act = act_buf.reshape(-1, act_dim)
         b_logp = logp_buf.reshape(-1)
@@ -644,7 +645,7 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
 
-        # ---- Progress, evaluation, checkpoints
+        # ---- Progress, evaluation (building its ExpertPolicy draws from torch's RNG), checkpoints
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
@@ -665,8 +666,7 @@ def train(args: Args):
         if global_step >= next_save:
             next_save += args.save_every_steps
             save_atomically(checkpoint(), latest_path)
-        over_time = elapsed > args.max_minutes * 60
-        if args.max_minutes and over_time and global_step < args.total_timesteps:
+        if args.max_minutes and elapsed > args.max_minutes * 60:
             break
 
     save_atomically(checkpoint(), latest_path)
