@@ -61,7 +61,7 @@ class Args:
     learning_rate: float | None = None
     """Adam learning rate, decayed linearly to 0; None: 1e-5 for Hopper, 1e-4 otherwise"""
     hidden: int = 300
-    """width of the hidden layers"""
+    """width of the hidden layers (the authors' 300)"""
     eval_every: int = 100
     """evaluate every this many epochs and after the last; a seed's score: the mean of the last 3"""
     eval_episodes: int = 10

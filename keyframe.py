@@ -159,7 +159,7 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
         loss = F.mse_loss(model(inputs[idx]), targets[idx])
         loss.backward()
         optimizer.step()
-    # The squared error of each sample, summed over the action's entries; no gradient needed.
+    # Each sample's squared error summed over the action's entries; only softmax feels its scale.
     with torch.no_grad():
         return ((model(inputs) - targets) ** 2).sum(1)
 
