@@ -107,7 +107,7 @@ def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
 
 
 class Normalizer(nn.Module):
-    """Standardises each entry by the training inputs' mean and std (at least 1e-6), saved."""
+    """Standardises entries by the training inputs' mean and std (>= 1e-6); saved with the model."""
 
     def __init__(self, inputs: torch.Tensor):
         super().__init__()
@@ -205,7 +205,7 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 
 # Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; before t's episode, its first frame repeated."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []
