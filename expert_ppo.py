@@ -88,7 +88,7 @@ class Args:
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """expert of --eval-only (run at its training frame skip) and --make-demos (at --frame-skip)"""
+    """the expert --eval-only (at --frame-skip, else its training one) and --make-demos roll out"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
