@@ -1,10 +1,10 @@
 # Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Table 2); see README.md
 """C2F: a coarse MLP pi_phi on o_t gives a coarse action zeta; an MLP pi_theta encodes the history
-[o_{t-H+1}, ..., o_t]; one more layer maps that feature and zeta, through a stop-gradient, to a_t.
+[o_{t-H+1}, ..., o_t]; one more layer maps that feature and sg(zeta) (a stop-gradient) to a_t.
 
 zeta, a guess of a_t from o_t alone, is easier to copy than the a_{t-1} the history reveals (the
-copycat shortcut), so the policy learns to refine zeta. Table 3's ablations and the capacity
-control are in c2f_table3.py.
+copycat shortcut), so the policy learns to refine zeta. Table 3's (CARLA) ablations: c2f_table3.py.
+Code marked `# Copied from bc_oh.first..last` is bc_oh.py's definitions first to last, unchanged.
 
     python c2f.py --env Hopper-v4
 """
@@ -44,7 +44,7 @@ class Args:
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, one run each; the result is their mean ± std"""
     workers: int | None = None
-    """seeds trained at once, one process each; None: one per seed (1 with --cuda)"""
+    """seeds trained at once, one process each; None: one per seed; with --cuda always 1"""
     demos: str | None = None
     """demonstrations (.npz); None: demos/<env>_<N>.npz, made by expert_ppo.py --make-demos"""
     num_demo_samples: int | None = None
@@ -56,7 +56,7 @@ class Args:
     history: int = 2
     """frames H in the observation history, o_t included"""
     epochs: int = 1000
-    """epochs of N // batch_size minibatches, each drawn uniformly with replacement"""
+    """epochs of (demo steps // batch size) minibatches, each drawn uniformly with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: float | None = None
@@ -104,8 +104,8 @@ class Policy(nn.Module):
         self.obs_dim = obs_dim
         # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(obs_dim, act_dim, hidden)
-        # The policy model pi_theta: three hidden layers on the history, one more than BC-OH's MLP
-        # (docs/methods.md); split after the first, as in c2f_table3.py, so the weights share names.
+        # pi_theta: section 8.3's three-layer MLP on the history, whose output is a feature, not an
+        # action (a hidden layer more than BC-OH's); split after the first, as c2f_table3.py's.
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
@@ -113,7 +113,7 @@ class Policy(nn.Module):
         self.head = nn.Linear(hidden + act_dim, act_dim)
 
     def coarse_and_final(self, obs_history):
-        """zeta from o_t, the history's last frame, and the final action: what Eq. 2 trains."""
+        """(zeta, final action), the outputs Eq. 2 trains; zeta reads only o_t, the last frame."""
         normalized = self.normalize(obs_history)
         zeta = self.coarse(normalized[:, -self.obs_dim :])
         feature = self.policy_rest(self.policy_first(normalized))
@@ -158,7 +158,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
-        # Eq. 2: the final action's and zeta's mean squared errors to the expert's actions, summed.
+        # Eq. 2's two MSE losses (section 8.3), summed: zeta is detached, so each trains its model.
         zeta, final = policy.coarse_and_final(inputs[idx])
         actions = targets[idx]
         final_loss = F.mse_loss(final, actions)
@@ -186,7 +186,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            # The learning rate decays linearly to 0 (section 8.3).
+            # Linear learning-rate decay (section 8.3), from --learning-rate towards 0.
             for group in optimizer.param_groups:
                 group["lr"] = args.learning_rate * (1 - step / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
@@ -247,7 +247,7 @@ class UsageError(Exception):
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
         raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
@@ -336,7 +336,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
-    # Demo sizes of section 8.3: 20k steps for Hopper, 10k for Ant and Walker2d (and others).
+    # Section 8.3's demo sizes: 20k for Hopper, 10k for Ant and Walker2d; here 10k for the others.
     paper_n = 10000
     if args.env.startswith("Hopper"):
         paper_n = 20000
@@ -496,7 +496,7 @@ def run(args):
     if args.frame_skip is None:
         args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
     make_env(args.env, args.frame_skip)
-    # Learning rates of section 8.3: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (and others).
+    # Section 8.3's learning rates: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (the rest too).
     if args.learning_rate is None:
         args.learning_rate = 1e-4
         if args.env.startswith("Hopper"):

@@ -153,7 +153,7 @@ class PartialObservation(gym.ObservationWrapper):
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
         raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
@@ -272,7 +272,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
-    # Demo sizes of section 8.3: 20k steps for Hopper, 10k for Ant and Walker2d (and others).
+    # Section 8.3's demo sizes: 20k for Hopper, 10k for Ant and Walker2d; here 10k for the others.
     paper_n = 10000
     if args.env.startswith("Hopper"):
         paper_n = 20000

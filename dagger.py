@@ -43,7 +43,7 @@ class Args:
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     """training seeds, one run each; the result is their mean ± std"""
     workers: int | None = None
-    """seeds trained at once, one process each; None: one per seed (1 with --cuda)"""
+    """seeds trained at once, one process each; None: one per seed; with --cuda always 1"""
     demos: str | None = None
     """demonstrations (.npz); None: demos/<env>_<N>.npz, made by expert_ppo.py --make-demos"""
     num_demo_samples: int | None = None
@@ -55,7 +55,7 @@ class Args:
     history: int = 2
     """frames H in the observation history, o_t included"""
     epochs: int = 1000
-    """epochs of N // batch_size minibatches, each drawn uniformly with replacement"""
+    """epochs of (demo steps // batch size) minibatches, each drawn uniformly with replacement"""
     batch_size: int = 64
     """minibatch size"""
     learning_rate: float | None = None
@@ -253,7 +253,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             total_steps = args.dagger_epochs * steps_per_epoch
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            # The learning rate decays linearly to 0 (section 8.3).
+            # Linear learning-rate decay (section 8.3), from --learning-rate towards 0.
             for group in optimizer.param_groups:
                 group["lr"] = args.learning_rate * (1 - (step - round_first_step) / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
@@ -322,7 +322,7 @@ class UsageError(Exception):
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
         raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)
@@ -411,7 +411,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
-    # Demo sizes of section 8.3: 20k steps for Hopper, 10k for Ant and Walker2d (and others).
+    # Section 8.3's demo sizes: 20k for Hopper, 10k for Ant and Walker2d; here 10k for the others.
     paper_n = 10000
     if args.env.startswith("Hopper"):
         paper_n = 20000
@@ -625,7 +625,7 @@ def run(args):
     make_env(args.env, args.frame_skip)
     # The expert is queried online: a missing one fails now, not after round 0.
     load_expert(args.expert.format(env=args.env), args.env)
-    # Learning rates of section 8.3: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (and others).
+    # Section 8.3's learning rates: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (the rest too).
     if args.learning_rate is None:
         args.learning_rate = 1e-4
         if args.env.startswith("Hopper"):

@@ -117,7 +117,7 @@ def require(condition, message: str):
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the paper's) or {env_id}-v5"
+        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
         raise UsageError(f"env {env_id!r} has no version: use {versions}")
     try:
         env = gym.make(env_id)

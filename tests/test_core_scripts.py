@@ -94,7 +94,7 @@ def test_c2f_table3_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
 
 BAD_INPUTS = {
     "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
-    "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 (the paper's) or Hopper-v5"),
+    "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 (the default) or Hopper-v5"),
     "history 0": (["--history", 0], "--history must be positive, got 0"),
     "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1"),
     "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: check --demos, or make it: "
