@@ -186,7 +186,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
     for epoch in range(1, args.epochs + 1):
         epoch_start = time.time()
         for _ in range(steps_per_epoch):
-            # Linear learning-rate decay (section 8.3), from --learning-rate towards 0.
+            # Linear learning-rate decay (section 8.3), from the initial rate towards 0.
             for group in optimizer.param_groups:
                 group["lr"] = args.learning_rate * (1 - step / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)

@@ -261,7 +261,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
         epoch_start = time.time()
         adversary_error = torch.zeros((), device=device)
         for _ in range(steps_per_epoch):
-            # Linear learning-rate decay (section 8.3), each group from its own rate towards 0.
+            # Linear learning-rate decay (section 8.3), from the initial rate towards 0.
             for group, initial_rate in zip(optimizer.param_groups, initial_rates):
                 group["lr"] = initial_rate * (1 - step / total_steps)
             idx = torch.randint(num_samples, (args.batch_size,), device=device, generator=generator)
