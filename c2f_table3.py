@@ -3,8 +3,8 @@
 defaults this file is c2f.py: the same model, the same weights, the same printed digits.
 
     --fusion              where sg(zeta) joins the policy model: late, into the last layer (c2f.py's
-                          reading of the paper); middle, into pi_theta's second layer; early, beside
-                          the input frames (Table 3's); output and penultimate, two other readings
+                          reading of the paper); Table 3's middle, into pi_theta's second layer, and
+                          early, beside the input frames; output and penultimate, two other readings
                           (section 8.3: "to the output of policy model"; 5.1: "penultimate FC")
     --coarse-output       feature: the coarse model's last hidden feature ("ResNet output as zeta")
     --coarse-input        history: the coarse model reads the whole history ("BC-OH as pi_phi,
@@ -154,7 +154,7 @@ class Policy(nn.Module):
         elif args.fusion != "penultimate":
             layers += [nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
-        # One more fully-connected layer maps pi_theta's output (and sg(zeta) if fused late) to a_t.
+        # A last Linear maps pi_theta's output, with sg(zeta) unless fused earlier, to the action.
         head_in = hidden
         if args.fusion == "output":
             head_in = act_dim

@@ -512,7 +512,7 @@ class C2FPolicy(nn.Module):
         elif args.fusion != "penultimate":
             layers += [nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
-        # One more fully-connected layer maps pi_theta's output (and sg(zeta) if fused late) to a_t.
+        # A last Linear maps pi_theta's output, with sg(zeta) unless fused earlier, to the action.
         head_in = hidden
         if args.fusion == "output":
             head_in = act_dim
