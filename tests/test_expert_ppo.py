@@ -128,9 +128,12 @@ def test_shipped_expert_scores_well():
         (["--frame-skip", 0], "--frame-skip must be positive"),
         (["--env", "Pendulum-v1", "--frame-skip", 2], "is not a MuJoCo env"),
         (["--eval-only", "--checkpoint", "{tiny}", "--frame-skip", 1, "--ship-to", "x.pt"], "was trained at frame skip 4"),
+        (["--gamma", 1.5], "--gamma must be in (0, 1], got 1.5"),
+        (["--gamma", "nan"], "--gamma must be in (0, 1], got nan"),
+        (["--gae-lambda", -0.1], "--gae-lambda must be in [0, 1], got -0.1"),
     ],
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
-         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate"],
+         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
