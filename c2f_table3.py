@@ -97,6 +97,11 @@ class Args:
     two_stage: bool = False
     """train the coarse model alone for --epochs and freeze it, then the rest for --epochs"""
 
+    def __post_init__(self):
+        if self.two_stage and not self.coarse_action:
+            both = "--two-stage trains the coarse model first, --no-coarse-action never uses it"
+            raise UsageError(f"{both}: pass one of them")
+
 
 # ---- The method: C2F's networks, loss and training loop, with Table 3's ablations ----
 # Copied from bc_oh.mlp..Normalizer
@@ -125,7 +130,6 @@ class Policy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         self.args = args
-        hidden = args.hidden
         # Each model reads the last *_in_dim entries of [o_{t-H+1}, ..., o_t]: o_t, or them all.
         self.coarse_in_dim = obs_dim
         if args.coarse_input == "history":
@@ -134,28 +138,28 @@ class Policy(nn.Module):
         if args.policy_input == "current":
             self.policy_in_dim = obs_dim
         # The coarse model pi_phi: an MLP on o_t (as BC-SO), or on the history; it outputs zeta.
-        self.coarse = mlp(self.coarse_in_dim, act_dim, hidden)
+        self.coarse = mlp(self.coarse_in_dim, act_dim, args.hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
         fed_dim = act_dim
         if args.coarse_output == "feature":
-            fed_dim = hidden
+            fed_dim = args.hidden
         # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim
-        self.policy_first = nn.Sequential(nn.Linear(first_in, hidden), nn.ReLU())
-        second_in = hidden
+        self.policy_first = nn.Sequential(nn.Linear(first_in, args.hidden), nn.ReLU())
+        second_in = args.hidden
         if args.fusion == "middle":
             second_in += fed_dim
-        layers = [nn.Linear(second_in, hidden), nn.ReLU()]
+        layers = [nn.Linear(second_in, args.hidden), nn.ReLU()]
         # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
         if args.fusion == "output":
-            layers.append(nn.Linear(hidden, act_dim))
+            layers.append(nn.Linear(args.hidden, act_dim))
         elif args.fusion != "penultimate":
-            layers += [nn.Linear(hidden, hidden), nn.ReLU()]
+            layers += [nn.Linear(args.hidden, args.hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
         # A last Linear maps pi_theta's output, with sg(zeta) unless fused earlier, to the action.
-        head_in = hidden
+        head_in = args.hidden
         if args.fusion == "output":
             head_in = act_dim
         if args.fusion in ("late", "output", "penultimate"):
@@ -216,9 +220,6 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
     """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
-    if args.two_stage and not args.coarse_action:
-        both = "--two-stage trains the coarse model first, --no-coarse-action never uses it"
-        raise UsageError(f"{both}: pass one of them")
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
@@ -268,8 +269,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 def fit(
     args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True
 ) -> tuple:
-    """The training loop: random minibatches, a linearly decaying learning rate, evaluations
-    (none with evaluate_policy=False: the first stage of two-stage training)."""
+    """The training loop: minibatches, a decaying lr, evaluations unless evaluate_policy=False."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps = args.epochs * steps_per_epoch
     generator = torch.Generator(device=device).manual_seed(seed)

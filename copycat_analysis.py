@@ -483,7 +483,6 @@ class C2FPolicy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         self.args = args
-        hidden = args.hidden
         # Each model reads the last *_in_dim entries of [o_{t-H+1}, ..., o_t]: o_t, or them all.
         self.coarse_in_dim = obs_dim
         if args.coarse_input == "history":
@@ -492,28 +491,28 @@ class C2FPolicy(nn.Module):
         if args.policy_input == "current":
             self.policy_in_dim = obs_dim
         # The coarse model pi_phi: an MLP on o_t (as BC-SO), or on the history; it outputs zeta.
-        self.coarse = mlp(self.coarse_in_dim, act_dim, hidden)
+        self.coarse = mlp(self.coarse_in_dim, act_dim, args.hidden)
         # --coarse-output: the coarse model passes on zeta, or its last hidden feature.
         fed_dim = act_dim
         if args.coarse_output == "feature":
-            fed_dim = hidden
+            fed_dim = args.hidden
         # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim
-        self.policy_first = nn.Sequential(nn.Linear(first_in, hidden), nn.ReLU())
-        second_in = hidden
+        self.policy_first = nn.Sequential(nn.Linear(first_in, args.hidden), nn.ReLU())
+        second_in = args.hidden
         if args.fusion == "middle":
             second_in += fed_dim
-        layers = [nn.Linear(second_in, hidden), nn.ReLU()]
+        layers = [nn.Linear(second_in, args.hidden), nn.ReLU()]
         # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
         if args.fusion == "output":
-            layers.append(nn.Linear(hidden, act_dim))
+            layers.append(nn.Linear(args.hidden, act_dim))
         elif args.fusion != "penultimate":
-            layers += [nn.Linear(hidden, hidden), nn.ReLU()]
+            layers += [nn.Linear(args.hidden, args.hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
         # A last Linear maps pi_theta's output, with sg(zeta) unless fused earlier, to the action.
-        head_in = hidden
+        head_in = args.hidden
         if args.fusion == "output":
             head_in = act_dim
         if args.fusion in ("late", "output", "penultimate"):

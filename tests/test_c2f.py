@@ -11,7 +11,7 @@ import bc_oh
 import bc_so
 import c2f
 import c2f_table3
-from conftest import fake_demos, skip_evaluation, tiny_args
+from conftest import assert_usage_error, fake_demos, run_in_process, skip_evaluation, tiny_args
 
 OBS, ACT, H, HIDDEN = 11, 3, 3, 16
 
@@ -329,9 +329,16 @@ def test_two_stage_coarse_model_is_bc_so(monkeypatch, capsys):
             assert torch.allclose(bc_so_weights[f"net.{name.removeprefix('coarse.')}"], value, atol=1e-6), name
 
 
-def test_two_stage_without_the_coarse_action_is_refused(monkeypatch, capsys):
-    with pytest.raises(c2f_table3.UsageError, match="--two-stage trains the coarse model first, --no-coarse-action never uses it"):
-        train(c2f_table3, monkeypatch, capsys, two_stage=True, coarse_action=False)
+def test_two_stage_without_the_coarse_action_is_refused_as_the_flags_are_parsed(tmp_path, monkeypatch):
+    """Args refuses the pair when it is built: the script prints one line, exits 2 and writes nothing
+    (no output folder), and code that builds Args itself gets the same UsageError."""
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process("c2f_table3.py", "--two-stage", "--no-coarse-action", "--output-dir", tmp_path / "out")
+    assert_usage_error(result, "--two-stage trains the coarse model first, --no-coarse-action never uses it: pass one of them")
+    assert result.returncode == 2
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(c2f_table3.UsageError, match="--two-stage trains the coarse model first"):
+        tiny_args(c2f_table3, two_stage=True, coarse_action=False)
 
 
 # ----------------------------------------------------------------------------------------------
