@@ -25,18 +25,6 @@ import torch.nn as nn
 import tyro
 
 
-# Copied from bc_oh.print_mujoco_warning
-def print_mujoco_warning(text: str):
-    # MuJoCo 3.x warns about gymnasium's HalfCheetah model each time it is made: skip that one.
-    if "settotalmass" not in text:
-        print(f"MuJoCo warning: {text}", file=sys.stderr)
-
-
-# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
-gym.logger.min_level = gym.logger.ERROR
-mujoco.set_mju_user_warning(print_mujoco_warning)
-
-
 @dataclass
 class Args:
     env: str = "Hopper-v4"
@@ -101,78 +89,7 @@ class Args:
     """with --eval-only: --checkpoint may be made for another version of --env (v4 for v5)"""
 
 
-# ---- Env ----
-# Copied from bc_oh.UsageError
-class UsageError(Exception):
-    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
-
-
-def require(condition, message: str):
-    """Refuse bad input in one line: a UsageError unless condition holds."""
-    if not condition:
-        raise UsageError(message)
-
-
-# Copied from bc_oh.make_env
-def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
-    """The gymnasium env, at another control rate when frame_skip is given."""
-    if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
-        raise UsageError(f"env {env_id!r} has no version: use {versions}")
-    try:
-        env = gym.make(env_id)
-    except Exception as error:
-        # gymnasium raises several error types for unknown or broken ids.
-        raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
-    if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
-    native = getattr(env.unwrapped, "frame_skip", None)
-    if frame_skip is None or frame_skip == native:
-        return env
-    if native is None:
-        raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
-    # The same duration of an episode, and the same scale of returns, at the new rate.
-    steps = round(env.spec.max_episode_steps * native / frame_skip)
-    env = gym.make(env_id, max_episode_steps=steps)
-    env.unwrapped.frame_skip = frame_skip
-    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
-
-
-def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:
-    """The frame skip of make_env(env_id, frame_skip), None if not MuJoCo; bad input fails here."""
-    fix = "e.g. 1, or leave it out for the env's own"
-    positive = frame_skip is None or frame_skip > 0
-    require(positive, f"--frame-skip must be positive, got {frame_skip}: {fix}")
-    env = make_env(env_id, frame_skip)
-    resolved = getattr(env.unwrapped, "frame_skip", None)
-    env.close()
-    return resolved
-
-
-class RunningMeanStd:
-    """Running mean and variance (Chan et al.), one for all envs; normalize() clips to +-10."""
-
-    def __init__(self, shape=()):
-        self.mean = np.zeros(shape)
-        self.var = np.ones(shape)
-        self.count = 1e-4
-
-    def update(self, batch: np.ndarray):
-        batch_mean = batch.mean(0)
-        batch_var = batch.var(0)
-        batch_count = batch.shape[0]
-        delta = batch_mean - self.mean
-        total = self.count + batch_count
-        self.mean = self.mean + delta * batch_count / total
-        correction = delta**2 * self.count * batch_count / total
-        self.var = (self.var * self.count + batch_var * batch_count + correction) / total
-        self.count = total
-
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
-
-
-# ---- Networks ----
+# ---- The method: PPO's actor and critic, and its running normalisation ----
 def mlp(in_dim: int, out_dim: int, hidden: int, last_std: float) -> nn.Sequential:
     """Two tanh hidden layers with orthogonal init, as in Huang et al.'s PPO details."""
     first = nn.Linear(in_dim, hidden)
@@ -203,248 +120,30 @@ class Agent(nn.Module):
         return action, dist.log_prob(action).sum(-1), dist.entropy().sum(-1), self.value(obs)
 
 
-class ExpertPolicy(nn.Module):
-    """The deterministic expert: frozen obs normalisation, the actor's mean action, clipped."""
+class RunningMeanStd:
+    """Running mean and variance (Chan et al.), one for all envs; normalize() clips to +-10."""
 
-    def __init__(self, checkpoint: dict):
-        super().__init__()
-        obs_dim = checkpoint["obs_shape"][0]
-        act_dim = checkpoint["action_shape"][0]
-        hidden = checkpoint["hidden"]
-        layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
-        self.net = nn.Sequential(*layers, nn.Linear(hidden, act_dim))
-        self.net.load_state_dict(checkpoint["actor"])
-        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
-            self.register_buffer(name, checkpoint[name].float())
+    def __init__(self, shape=()):
+        self.mean = np.zeros(shape)
+        self.var = np.ones(shape)
+        self.count = 1e-4
 
-    @torch.no_grad()
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
-        obs = obs[..., : len(self.obs_mean)]
-        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
-        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+    def update(self, batch: np.ndarray):
+        batch_mean = batch.mean(0)
+        batch_var = batch.var(0)
+        batch_count = batch.shape[0]
+        delta = batch_mean - self.mean
+        total = self.count + batch_count
+        self.mean = self.mean + delta * batch_count / total
+        correction = delta**2 * self.count * batch_count / total
+        self.var = (self.var * self.count + batch_var * batch_count + correction) / total
+        self.count = total
 
-
-def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
-    if not os.path.isfile(path):
-        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-        raise UsageError(f"expert checkpoint {path} not found: {train}")
-    try:
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-        policy = ExpertPolicy(checkpoint)
-        trained_on = checkpoint["env_id"]
-    except Exception as error:
-        problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
-        raise UsageError(f"{problem}: re-copy or re-train it")
-    if trained_on != env_id:
-        other = f"{path} is an expert for {trained_on}, not {env_id}"
-        raise UsageError(f"{other}: pass the one made for {env_id}")
-    return policy.eval()
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
 
 
-# ---- Checkpoints ----
-def machine() -> dict:
-    """Where a result was made: the same command, kind of CPU and versions give the same digits."""
-    cpu = None
-    if os.path.isfile("/proc/cpuinfo"):
-        with open("/proc/cpuinfo") as file:
-            cpu = re.search(r"^model name\s*: (.*)$", file.read(), re.M)
-    return {
-        "cpu": cpu[1] if cpu else platform.processor(),
-        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-        "MKL_CBWR": os.environ.get("MKL_CBWR"),
-        "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
-        "torch": str(torch.__version__),
-        "numpy": np.__version__,
-        "mujoco": mujoco.__version__,
-        "gymnasium": gym.__version__,
-    }
-
-
-def write_atomically(path: str, write):
-    """Call write(file) on a temporary file, then rename it to path: never half a file."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "wb") as file:
-            write(file)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def save_atomically(obj, path: str):
-    write_atomically(path, lambda file: torch.save(obj, file))
-
-
-# ---- Evaluation ----
-def evaluate(policy, env_id: str, episodes: int, seed: int, frame_skip: int | None = None) -> list:
-    """The returns of the deterministic policy, one episode each of seeds seed, seed+1, ..."""
-    env = make_env(env_id, frame_skip)
-    returns = []
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        done, total = False, 0.0
-        while not done:
-            action = policy(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total = total + float(reward)
-            done = terminated or truncated
-        returns.append(total)
-    env.close()
-    return returns
-
-
-def checkpoint_env(path: str) -> str | None:
-    """The env the checkpoint at path was made for; None if unreadable (load_expert says why)."""
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
-    except Exception:
-        return None
-
-
-def retargeted_expert(path: str, env_id: str):
-    """--retarget: the expert at path, made for another version of env_id (Hopper-v4 for Hopper-v5)
-    with the same shapes, or whose observation is env_id's leading positions and velocities."""
-    made_for = checkpoint_env(path) or env_id
-    policy = load_expert(path, made_for)
-    env = make_env(env_id)
-    structure = getattr(env.unwrapped, "observation_structure", {})
-    positions_and_velocities = structure.get("qpos", 0) + structure.get("qvel", 0)
-    observations = (env.observation_space.shape[0], positions_and_velocities)
-    same_input = policy.net[0].in_features in observations
-    same_output = policy.net[-1].out_features == env.action_space.shape[0]
-    same_family = made_for.split("-")[0] == env_id.split("-")[0]
-    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s"
-    require(same_family and same_input and same_output, f"{other}: train one for {env_id}")
-    return policy, made_for
-
-
-def eval_only(args: Args):
-    path = args.checkpoint.format(env=args.env)
-    native = env_frame_skip(args.env)
-    env_frame_skip(args.env, args.frame_skip)
-    require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
-    recorded = checkpoint_env(path)
-    same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
-    other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
-    fix = f"on {args.env} (and --ship-to to ship it there), or a checkpoint made for {args.env}"
-    require(args.retarget or recorded == args.env or not same_family, f"{other} {fix}")
-    if args.retarget:
-        policy, made_for = retargeted_expert(path, args.env)
-    else:
-        policy = load_expert(path, args.env)
-        made_for = args.env
-    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
-    # A policy acts well at the rate it was trained at (the env's own, if not recorded).
-    trained_at = checkpoint.get("frame_skip", native)
-    frame_skip = args.frame_skip or trained_at
-    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
-    fix = f"drop --frame-skip {frame_skip} or --ship-to"
-    require(not args.ship_to or frame_skip == trained_at, f"{there}, {fix}")
-    if frame_skip != native:
-        rates = f"the env's own is {native}; the expert was trained at {trained_at}"
-        print(f"evaluating at frame skip {frame_skip} ({rates})")
-    returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
-    for i, episode_return in enumerate(returns):
-        print(f"episode {i}: return {episode_return:.1f}")
-    mean, std = float(np.mean(returns)), float(np.std(returns))
-    if args.ship_to:
-        # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
-        checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
-        if made_for != args.env:
-            checkpoint.update(env_id=args.env, retargeted_from=made_for)
-        save_atomically(checkpoint, args.ship_to)
-        print(f"wrote {args.ship_to}")
-    print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
-
-
-# ---- Demonstrations (--make-demos): the input of the imitation files ----
-def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert: o_t, a_t, episode starts, and what Minari needs too."""
-    env = make_env(env_id, frame_skip)
-    steps = []
-    final_observations = []
-    obs, _ = env.reset(seed=seed)
-    start = True
-    for step in range(num_samples):
-        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
-        next_obs, reward, terminated, truncated, _ = env.step(action)
-        # The budget ends the last episode.
-        truncated = truncated or step == num_samples - 1
-        steps.append((obs, action, start, reward, terminated, truncated))
-        obs = next_obs
-        start = terminated or truncated
-        if start:
-            final_observations.append(next_obs)
-            obs, _ = env.reset()
-    env.close()
-    observations, actions, starts, rewards, terminations, truncations = zip(*steps)
-    return {
-        "observations": np.array(observations, np.float64),
-        "actions": np.array(actions, np.float32),
-        "episode_starts": np.array(starts),
-        "rewards": np.array(rewards, np.float64),
-        "terminations": np.array(terminations),
-        "truncations": np.array(truncations),
-        "final_observations": np.array(final_observations, np.float64),
-    }
-
-
-def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
-    """Where --make-demos writes, and where the imitation files look when --demos is not given."""
-    rate = "" if frame_skip == native else f"_fs{frame_skip}"
-    return f"demos/{env_id}{rate}_{num_samples}.npz"
-
-
-def make_demos(args: Args):
-    """Roll the expert out into demos/, unless a file of the same expert and settings is there."""
-    native = env_frame_skip(args.env)
-    frame_skip = env_frame_skip(args.env, args.frame_skip)
-    num_samples = args.num_demo_samples
-    if num_samples is None:
-        num_samples = 20000 if args.env.startswith("Hopper") else 10000
-    require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
-    expert_path = args.checkpoint.format(env=args.env)
-    path = demo_path(args.env, frame_skip, native, num_samples)
-    expert = load_expert(expert_path, args.env)
-    with open(expert_path, "rb") as file:
-        expert_sha256 = hashlib.sha256(file.read()).hexdigest()
-    checkpoint = torch.load(expert_path, map_location="cpu", weights_only=True)
-    meta = {
-        "env_id": args.env,
-        "source": expert_path,
-        "expert_sha256": expert_sha256,
-        "num_samples": num_samples,
-        "seed": 0,
-        "frame_skip": frame_skip,
-        "expert_return": checkpoint.get("eval_return"),
-        "expert_frame_skip": checkpoint.get("frame_skip", native),
-    }
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            made = json.loads(str(data["meta"]))
-    except Exception:
-        made = {}
-    settings = ("env_id", "expert_sha256", "num_samples", "frame_skip")
-    if all(made.get(key) == meta[key] for key in settings):
-        print(f"{path}: already made from {expert_path} with these settings")
-        return
-    # An expert not shipped by --eval-only --ship-to has no return.
-    if meta["expert_return"] is None:
-        del meta["expert_return"]
-        del meta["expert_frame_skip"]
-    # One thread, as the imitation files rolled the expert out: the same digits.
-    torch.set_num_threads(1)
-    print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
-    demos = generate_demos(args.env, frame_skip, expert, num_samples)
-    write_atomically(path, lambda file: np.savez(file, meta=np.array(json.dumps(meta)), **demos))
-    print(f"wrote {path}")
-
-
-# ---- Training ----
+# ---- Training: rollouts, advantages (GAE), the clipped update, checkpoints ----
 def validate(args: Args):
     # require(value > 0) refuses a NaN too: NaN > 0 is False.
     positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden"
@@ -684,6 +383,307 @@ def train(args: Args):
     best = f"best periodic evaluation, {best_return:.1f}"
     print(f"wrote {latest_path} (last) and {best_path} ({best})")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
+
+
+# ---- Evaluation, and the deterministic expert the imitation files load ----
+class ExpertPolicy(nn.Module):
+    """The deterministic expert: frozen obs normalisation, the actor's mean action, clipped."""
+
+    def __init__(self, checkpoint: dict):
+        super().__init__()
+        obs_dim = checkpoint["obs_shape"][0]
+        act_dim = checkpoint["action_shape"][0]
+        hidden = checkpoint["hidden"]
+        layers = [nn.Linear(obs_dim, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()]
+        self.net = nn.Sequential(*layers, nn.Linear(hidden, act_dim))
+        self.net.load_state_dict(checkpoint["actor"])
+        for name in ("obs_mean", "obs_var", "action_low", "action_high"):
+            self.register_buffer(name, checkpoint[name].float())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        # An expert retargeted to a wider observation (Ant-v5's) reads its leading entries.
+        obs = obs[..., : len(self.obs_mean)]
+        obs = ((obs - self.obs_mean) / torch.sqrt(self.obs_var + 1e-8)).clamp(-10.0, 10.0)
+        return torch.maximum(torch.minimum(self.net(obs), self.action_high), self.action_low)
+
+
+def load_expert(path: str, env_id: str) -> ExpertPolicy:
+    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
+    if not os.path.isfile(path):
+        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
+        raise UsageError(f"expert checkpoint {path} not found: {train}")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        policy = ExpertPolicy(checkpoint)
+        trained_on = checkpoint["env_id"]
+    except Exception as error:
+        problem = f"{path} is not a readable expert checkpoint ({type(error).__name__})"
+        raise UsageError(f"{problem}: re-copy or re-train it")
+    if trained_on != env_id:
+        other = f"{path} is an expert for {trained_on}, not {env_id}"
+        raise UsageError(f"{other}: pass the one made for {env_id}")
+    return policy.eval()
+
+
+def evaluate(policy, env_id: str, episodes: int, seed: int, frame_skip: int | None = None) -> list:
+    """The returns of the deterministic policy, one episode each of seeds seed, seed+1, ..."""
+    env = make_env(env_id, frame_skip)
+    returns = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, total = False, 0.0
+        while not done:
+            action = policy(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total = total + float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    env.close()
+    return returns
+
+
+def checkpoint_env(path: str) -> str | None:
+    """The env the checkpoint at path was made for; None if unreadable (load_expert says why)."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
+    except Exception:
+        return None
+
+
+def retargeted_expert(path: str, env_id: str):
+    """--retarget: the expert at path, made for another version of env_id (Hopper-v4 for Hopper-v5)
+    with the same shapes, or whose observation is env_id's leading positions and velocities."""
+    made_for = checkpoint_env(path) or env_id
+    policy = load_expert(path, made_for)
+    env = make_env(env_id)
+    structure = getattr(env.unwrapped, "observation_structure", {})
+    positions_and_velocities = structure.get("qpos", 0) + structure.get("qvel", 0)
+    observations = (env.observation_space.shape[0], positions_and_velocities)
+    same_input = policy.net[0].in_features in observations
+    same_output = policy.net[-1].out_features == env.action_space.shape[0]
+    same_family = made_for.split("-")[0] == env_id.split("-")[0]
+    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s"
+    require(same_family and same_input and same_output, f"{other}: train one for {env_id}")
+    return policy, made_for
+
+
+def eval_only(args: Args):
+    path = args.checkpoint.format(env=args.env)
+    native = env_frame_skip(args.env)
+    env_frame_skip(args.env, args.frame_skip)
+    require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
+    recorded = checkpoint_env(path)
+    same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
+    other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
+    fix = f"on {args.env} (and --ship-to to ship it there), or a checkpoint made for {args.env}"
+    require(args.retarget or recorded == args.env or not same_family, f"{other} {fix}")
+    if args.retarget:
+        policy, made_for = retargeted_expert(path, args.env)
+    else:
+        policy = load_expert(path, args.env)
+        made_for = args.env
+    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    # A policy acts well at the rate it was trained at (the env's own, if not recorded).
+    trained_at = checkpoint.get("frame_skip", native)
+    frame_skip = args.frame_skip or trained_at
+    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
+    fix = f"drop --frame-skip {frame_skip} or --ship-to"
+    require(not args.ship_to or frame_skip == trained_at, f"{there}, {fix}")
+    if frame_skip != native:
+        rates = f"the env's own is {native}; the expert was trained at {trained_at}"
+        print(f"evaluating at frame skip {frame_skip} ({rates})")
+    returns = evaluate(policy, args.env, args.eval_episodes, seed=10_000, frame_skip=frame_skip)
+    for i, episode_return in enumerate(returns):
+        print(f"episode {i}: return {episode_return:.1f}")
+    mean, std = float(np.mean(returns)), float(np.std(returns))
+    if args.ship_to:
+        # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
+        checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
+        if made_for != args.env:
+            checkpoint.update(env_id=args.env, retargeted_from=made_for)
+        save_atomically(checkpoint, args.ship_to)
+        print(f"wrote {args.ship_to}")
+    print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
+
+
+# ---- The env ----
+# Copied from bc_oh.UsageError
+class UsageError(Exception):
+    """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
+
+
+def require(condition, message: str):
+    """Refuse bad input in one line: a UsageError unless condition holds."""
+    if not condition:
+        raise UsageError(message)
+
+
+# Copied from bc_oh.make_env
+def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
+    """The gymnasium env, at another control rate when frame_skip is given."""
+    if "-v" not in env_id:
+        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
+        raise UsageError(f"env {env_id!r} has no version: use {versions}")
+    try:
+        env = gym.make(env_id)
+    except Exception as error:
+        # gymnasium raises several error types for unknown or broken ids.
+        raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+    native = getattr(env.unwrapped, "frame_skip", None)
+    if frame_skip is None or frame_skip == native:
+        return env
+    if native is None:
+        raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
+    # The same duration of an episode, and the same scale of returns, at the new rate.
+    steps = round(env.spec.max_episode_steps * native / frame_skip)
+    env = gym.make(env_id, max_episode_steps=steps)
+    env.unwrapped.frame_skip = frame_skip
+    return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)
+
+
+def env_frame_skip(env_id: str, frame_skip: int | None = None) -> int | None:
+    """The frame skip of make_env(env_id, frame_skip), None if not MuJoCo; bad input fails here."""
+    fix = "e.g. 1, or leave it out for the env's own"
+    positive = frame_skip is None or frame_skip > 0
+    require(positive, f"--frame-skip must be positive, got {frame_skip}: {fix}")
+    env = make_env(env_id, frame_skip)
+    resolved = getattr(env.unwrapped, "frame_skip", None)
+    env.close()
+    return resolved
+
+
+# Copied from bc_oh.print_mujoco_warning
+def print_mujoco_warning(text: str):
+    # MuJoCo 3.x warns about gymnasium's HalfCheetah model each time it is made: skip that one.
+    if "settotalmass" not in text:
+        print(f"MuJoCo warning: {text}", file=sys.stderr)
+
+
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
+mujoco.set_mju_user_warning(print_mujoco_warning)
+
+
+# ---- Checkpoints ----
+def machine() -> dict:
+    """Where a result was made: the same command, kind of CPU and versions give the same digits."""
+    cpu = None
+    if os.path.isfile("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as file:
+            cpu = re.search(r"^model name\s*: (.*)$", file.read(), re.M)
+    return {
+        "cpu": cpu[1] if cpu else platform.processor(),
+        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "MKL_CBWR": os.environ.get("MKL_CBWR"),
+        "MKL_ENABLE_INSTRUCTIONS": os.environ.get("MKL_ENABLE_INSTRUCTIONS"),
+        "torch": str(torch.__version__),
+        "numpy": np.__version__,
+        "mujoco": mujoco.__version__,
+        "gymnasium": gym.__version__,
+    }
+
+
+def write_atomically(path: str, write):
+    """Call write(file) on a temporary file, then rename it to path: never half a file."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def save_atomically(obj, path: str):
+    write_atomically(path, lambda file: torch.save(obj, file))
+
+
+# ---- Demonstrations (--make-demos): the input of the imitation files ----
+def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
+    """Roll out the deterministic expert: o_t, a_t, episode starts, and what Minari needs too."""
+    env = make_env(env_id, frame_skip)
+    steps = []
+    final_observations = []
+    obs, _ = env.reset(seed=seed)
+    start = True
+    for step in range(num_samples):
+        action = expert(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        next_obs, reward, terminated, truncated, _ = env.step(action)
+        # The budget ends the last episode.
+        truncated = truncated or step == num_samples - 1
+        steps.append((obs, action, start, reward, terminated, truncated))
+        obs = next_obs
+        start = terminated or truncated
+        if start:
+            final_observations.append(next_obs)
+            obs, _ = env.reset()
+    env.close()
+    observations, actions, starts, rewards, terminations, truncations = zip(*steps)
+    return {
+        "observations": np.array(observations, np.float64),
+        "actions": np.array(actions, np.float32),
+        "episode_starts": np.array(starts),
+        "rewards": np.array(rewards, np.float64),
+        "terminations": np.array(terminations),
+        "truncations": np.array(truncations),
+        "final_observations": np.array(final_observations, np.float64),
+    }
+
+
+def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
+    """Where --make-demos writes, and where the imitation files look when --demos is not given."""
+    rate = "" if frame_skip == native else f"_fs{frame_skip}"
+    return f"demos/{env_id}{rate}_{num_samples}.npz"
+
+
+def make_demos(args: Args):
+    """Roll the expert out into demos/, unless a file of the same expert and settings is there."""
+    native = env_frame_skip(args.env)
+    frame_skip = env_frame_skip(args.env, args.frame_skip)
+    num_samples = args.num_demo_samples
+    if num_samples is None:
+        num_samples = 20000 if args.env.startswith("Hopper") else 10000
+    require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
+    expert_path = args.checkpoint.format(env=args.env)
+    path = demo_path(args.env, frame_skip, native, num_samples)
+    expert = load_expert(expert_path, args.env)
+    with open(expert_path, "rb") as file:
+        expert_sha256 = hashlib.sha256(file.read()).hexdigest()
+    checkpoint = torch.load(expert_path, map_location="cpu", weights_only=True)
+    meta = {
+        "env_id": args.env,
+        "source": expert_path,
+        "expert_sha256": expert_sha256,
+        "num_samples": num_samples,
+        "seed": 0,
+        "frame_skip": frame_skip,
+        "expert_return": checkpoint.get("eval_return"),
+        "expert_frame_skip": checkpoint.get("frame_skip", native),
+    }
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            made = json.loads(str(data["meta"]))
+    except Exception:
+        made = {}
+    settings = ("env_id", "expert_sha256", "num_samples", "frame_skip")
+    if all(made.get(key) == meta[key] for key in settings):
+        print(f"{path}: already made from {expert_path} with these settings")
+        return
+    # An expert not shipped by --eval-only --ship-to has no return.
+    if meta["expert_return"] is None:
+        del meta["expert_return"]
+        del meta["expert_frame_skip"]
+    # One thread, as the imitation files rolled the expert out: the same digits.
+    torch.set_num_threads(1)
+    print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
+    demos = generate_demos(args.env, frame_skip, expert, num_samples)
+    write_atomically(path, lambda file: np.savez(file, meta=np.array(json.dumps(meta)), **demos))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

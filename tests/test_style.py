@@ -90,6 +90,16 @@ def test_the_method_is_the_first_code_after_args(name):
     assert isinstance(after, ast.FunctionDef) and after.name == "mlp", ast.dump(after)[:80]
 
 
+def test_expert_ppo_reads_ppo_first():
+    """expert_ppo.py reads in the method files' order: after `Args`, PPO's networks and its training
+    loop, before evaluation, the env code and the demos."""
+    body = ast.parse((REPO_ROOT / "expert_ppo.py").read_text()).body
+    names = [node.name for node in body if isinstance(node, (ast.FunctionDef, ast.ClassDef))]
+    method = ["Args", "mlp", "Agent", "RunningMeanStd", "validate", "train"]
+    assert names[: len(method)] == method
+    assert names.index("train") < names.index("evaluate") < names.index("make_env") < names.index("make_demos")
+
+
 @pytest.mark.parametrize("name", list(file_sizes.TARGETS))
 def test_each_file_is_plain(name):
     """No finding of scripts/plain_code.py but up to 3 packed assignments a file."""
