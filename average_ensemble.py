@@ -419,9 +419,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         steps = len(obs)
         raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
-        raise UsageError(
-            f"{path}: {take} steps, not more than a batch: pass a smaller --batch-size"
-        )
+        raise UsageError(f"{path}: {take} steps, not more than a batch: use a smaller --batch-size")
     obs = obs[:take]
     actions = actions[:take]
     starts = starts[:take]

@@ -39,6 +39,7 @@ CASES = {
     "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False: it is True on each episode's start"),
     "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError): see the format in README.md"),
     "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "v4.npz holds 200 steps: pass --num-demo-samples 200 or fewer"),
+    "a batch or fewer steps": (["--demos", "v4.npz", "--batch-size", 200], "v4.npz: 200 steps, not more than a batch: use a smaller --batch-size"),
 }
 
 
