@@ -269,7 +269,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
 def fit(
     args, policy, optimizer, train_step, num_samples: int, seed: int, device, evaluate_policy=True
 ) -> tuple:
-    """The training loop: minibatches, a decaying lr, evaluations unless evaluate_policy=False."""
+    """The training loop: minibatches, linear lr decay, evaluations unless evaluate_policy=False."""
     steps_per_epoch = num_samples // args.batch_size
     total_steps = args.epochs * steps_per_epoch
     generator = torch.Generator(device=device).manual_seed(seed)
