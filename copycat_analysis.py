@@ -203,7 +203,7 @@ class ExpertPolicy(nn.Module):
 
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
+    """Load an expert checkpoint written by expert_ppo.py, checking that it was made for env_id."""
     if not os.path.isfile(path):
         train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
         raise UsageError(f"expert checkpoint {path} not found: {train}")
@@ -222,7 +222,7 @@ def load_expert(path: str, env_id: str) -> ExpertPolicy:
 
 # Copied from expert_ppo.generate_demos
 def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert: o_t, a_t, episode starts, and what Minari needs too."""
+    """Roll out the deterministic expert: o_t, a_t, episode starts, and Minari's other fields."""
     env = make_env(env_id, frame_skip)
     steps = []
     final_observations = []

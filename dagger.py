@@ -528,7 +528,7 @@ class ExpertPolicy(nn.Module):
 
 # Copied from expert_ppo.load_expert
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
+    """Load an expert checkpoint written by expert_ppo.py, checking that it was made for env_id."""
     if not os.path.isfile(path):
         train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
         raise UsageError(f"expert checkpoint {path} not found: {train}")

@@ -1,10 +1,10 @@
-# PPO expert that makes the demonstrations (paper section 5.1, "Data collection"); see README.md
+# PPO expert that makes the demonstrations (paper section 8.3, "Data Collection"); see README.md
 """Proximal Policy Optimisation for gymnasium 1.x MuJoCo envs, CleanRL style, in one file.
 
 Train:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:   python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
 Evaluate: python expert_ppo.py --env Hopper-v4 --eval-only --checkpoint experts/Hopper-v4.pt
-Demos:    python expert_ppo.py --env Hopper-v4 --make-demos   (the imitation files' input)
+Demos:    python expert_ppo.py --env Hopper-v4 --make-demos   (input of bc_oh.py, c2f.py, ...)
 """
 
 import hashlib
@@ -76,7 +76,7 @@ class Args:
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """the expert --eval-only (at --frame-skip, else its training one) and --make-demos roll out"""
+    """the expert --eval-only (rate: its training one) and --make-demos (the env's) roll out"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
@@ -84,7 +84,7 @@ class Args:
     make_demos: bool = False
     """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the imitation files' demos"""
     num_demo_samples: int | None = None
-    """with --make-demos: demo steps; None: the paper's 20000 for Hopper, 10000 otherwise"""
+    """with --make-demos: demo steps; None: 20000 for Hopper, 10000 otherwise (section 8.3)"""
     retarget: bool = False
     """with --eval-only: --checkpoint may be made for another version of --env (v4 for v5)"""
 
@@ -189,6 +189,37 @@ def train(args: Args):
     global_step = 0
     best_return = -np.inf
 
+    def to_tensor(x):
+        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
+
+    # A checkpoint: a plain dict that torch.load(weights_only=True) reads (experts/README.md).
+    def checkpoint(eval_return=None):
+        return {
+            "format": "copycat-suite/expert-ppo/1",
+            "env_id": args.env,
+            "frame_skip": args.frame_skip,
+            "obs_shape": list(envs.single_observation_space.shape),
+            "action_shape": list(envs.single_action_space.shape),
+            "hidden": args.hidden,
+            "actor": agent.actor_mean.state_dict(),
+            "obs_mean": to_tensor(obs_rms.mean),
+            "obs_var": to_tensor(obs_rms.var),
+            "action_low": to_tensor(envs.single_action_space.low),
+            "action_high": to_tensor(envs.single_action_space.high),
+            "args": asdict(args),
+            "global_step": global_step,
+            "eval_return": eval_return,
+            "machine": machine(),
+            # Only needed to resume training:
+            "agent": agent.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "obs_count": obs_rms.count,
+            "ret_mean": to_tensor(ret_rms.mean),
+            "ret_var": to_tensor(ret_rms.var),
+            "ret_count": ret_rms.count,
+            "best_return": best_return,
+        }
+
     if args.resume and os.path.isfile(latest_path):
         cannot = f"cannot resume from {latest_path}"
         try:
@@ -219,37 +250,6 @@ def train(args: Args):
     elif args.resume:
         print(f"no {latest_path} yet: starting fresh")
 
-    def to_tensor(x):
-        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
-
-    # A checkpoint is a plain dict of tensors and numbers (experts/README.md).
-    def checkpoint(eval_return=None):
-        return {
-            "format": "copycat-suite/expert-ppo/1",
-            "env_id": args.env,
-            "frame_skip": args.frame_skip,
-            "obs_shape": list(envs.single_observation_space.shape),
-            "action_shape": list(envs.single_action_space.shape),
-            "hidden": args.hidden,
-            "actor": agent.actor_mean.state_dict(),
-            "obs_mean": to_tensor(obs_rms.mean),
-            "obs_var": to_tensor(obs_rms.var),
-            "action_low": to_tensor(envs.single_action_space.low),
-            "action_high": to_tensor(envs.single_action_space.high),
-            "args": asdict(args),
-            "global_step": global_step,
-            "eval_return": eval_return,
-            "machine": machine(),
-            # Only needed to resume training:
-            "agent": agent.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "obs_count": obs_rms.count,
-            "ret_mean": to_tensor(ret_rms.mean),
-            "ret_var": to_tensor(ret_rms.var),
-            "ret_count": ret_rms.count,
-            "best_return": best_return,
-        }
-
     def normalized(raw: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(obs_rms.normalize(raw), dtype=torch.float32)
 
@@ -264,7 +264,7 @@ def train(args: Args):
 
     # A resumed run gets fresh episodes.
     raw_obs, _ = envs.reset(seed=args.seed + global_step)
-    # Each env's discounted return, to scale rewards as NormalizeReward does (reset at any end).
+    # Each env's discounted return, to scale rewards as NormalizeReward does, but reset at any end.
     discounted_return = np.zeros(args.num_envs)
     episode_return = np.zeros(args.num_envs)
     recent_returns = []
@@ -344,7 +344,7 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
 
-        # ---- Progress, evaluation (building its ExpertPolicy draws from torch's RNG), checkpoints
+        # ---- Progress, evaluation (ExpertPolicy, below, draws from torch's RNG), checkpoints
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
@@ -380,8 +380,8 @@ def train(args: Args):
     mean = float(np.mean(returns))
     std = float(np.std(returns))
     save_atomically(checkpoint(mean), latest_path)
-    best = f"best periodic evaluation, {best_return:.1f}"
-    print(f"wrote {latest_path} (last) and {best_path} ({best})")
+    best = f"{best_path} keeps the best periodic evaluation ({best_return:.1f})"
+    print(f"wrote {latest_path} (last); {best}")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 
@@ -409,7 +409,7 @@ class ExpertPolicy(nn.Module):
 
 
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
-    """Load an expert checkpoint written by expert_ppo.py, checking that it fits env_id."""
+    """Load an expert checkpoint written by expert_ppo.py, checking that it was made for env_id."""
     if not os.path.isfile(path):
         train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
         raise UsageError(f"expert checkpoint {path} not found: {train}")
@@ -452,7 +452,7 @@ def checkpoint_env(path: str) -> str | None:
 
 
 def retargeted_expert(path: str, env_id: str):
-    """--retarget: the expert at path, made for another version of env_id (Hopper-v4 for Hopper-v5)
+    """--retarget: (expert, its env) from path, made for another version of env_id (e.g. v4 for v5)
     with the same shapes, or whose observation is env_id's leading positions and velocities."""
     made_for = checkpoint_env(path) or env_id
     policy = load_expert(path, made_for)
@@ -507,7 +507,7 @@ def eval_only(args: Args):
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 
-# ---- The env ----
+# ---- Bad input (UsageError, require) and the env ----
 # Copied from bc_oh.UsageError
 class UsageError(Exception):
     """Bad input from the user: printed as one line on stderr, exit status 2, no traceback."""
@@ -605,7 +605,7 @@ def save_atomically(obj, path: str):
 
 # ---- Demonstrations (--make-demos): the input of the imitation files ----
 def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int = 0) -> dict:
-    """Roll out the deterministic expert: o_t, a_t, episode starts, and what Minari needs too."""
+    """Roll out the deterministic expert: o_t, a_t, episode starts, and Minari's other fields."""
     env = make_env(env_id, frame_skip)
     steps = []
     final_observations = []
@@ -674,7 +674,7 @@ def make_demos(args: Args):
     if all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    # An expert not shipped by --eval-only --ship-to has no return.
+    # A checkpoint never evaluated to the end (a stopped run's latest.pt) has no return.
     if meta["expert_return"] is None:
         del meta["expert_return"]
         del meta["expert_frame_skip"]
