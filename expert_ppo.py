@@ -76,7 +76,7 @@ class Args:
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """the expert --eval-only (rate: its training one) and --make-demos (the env's) roll out"""
+    """the expert --eval-only (default rate: its training one) and --make-demos (env's) roll out"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
