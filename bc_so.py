@@ -177,9 +177,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
         if evaluating or epoch % max(1, args.epochs // 20) == 0:
-            last_return = "n/a"
-            if evaluations:
-                last_return = f"{evaluations[-1][1]:.1f}"
+            last_return = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             ms_per_step = 1000 * train_time / step
             minutes_left = (time.time() - start) / epoch * (args.epochs - epoch) / 60
             progress = f"seed {seed} | epoch {epoch}/{args.epochs} | loss {last_loss:.5f}"
@@ -312,9 +310,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     act_dim = env.action_space.shape[0]
     native = getattr(env.unwrapped, "frame_skip", None)
     # Section 8.3's demo sizes: 20k for Hopper, 10k for Ant and Walker2d; here 10k for the others.
-    paper_n = 10000
-    if args.env.startswith("Hopper"):
-        paper_n = 20000
+    paper_n = 20000 if args.env.startswith("Hopper") else 10000
     n = args.num_demo_samples or paper_n
     path = args.demos
     if path is None and args.frame_skip == native:
@@ -330,17 +326,16 @@ def load_demos(args, env: gym.Env) -> tuple:
             shipped = f"demos/{args.env}_{paper_n}.npz"
             fix += f", or the shipped file's first steps: --demos {shipped} --num-demo-samples {n}"
         raise UsageError(f"demo file {path} not found in {os.getcwd()}: {fix}")
+    dtypes = {"observations": np.float64, "actions": np.float32, "episode_starts": bool}
     demos = {}
     meta = {}
     try:
         with np.load(path, allow_pickle=False) as data:
             if "meta" in data:
                 meta = json.loads(str(data["meta"]))
-            for key, dtype in [("observations", np.float64), ("actions", np.float32)]:
+            for key, dtype in dtypes.items():
                 if key in data:
                     demos[key] = data[key].astype(dtype)
-            if "episode_starts" in data:
-                demos["episode_starts"] = data["episode_starts"].astype(bool)
     except Exception as error:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
@@ -353,7 +348,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_at != args.frame_skip:
         rates = f"frame skip {made_at}, not {args.frame_skip}"
         raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
-    for key in ["observations", "actions", "episode_starts"]:
+    for key in dtypes:
         if key not in demos:
             raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
     obs = demos["observations"]
@@ -393,9 +388,8 @@ def load_demos(args, env: gym.Env) -> tuple:
     # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
-    note = ""
-    if take < len(demos["actions"]):
-        note = f" (the first {take} of its {len(demos['actions'])})"
+    total = len(demos["actions"])
+    note = f" (the first {take} of its {total})" if take < total else ""
     print(f"demos: {take} steps from {path}{note}")
     scale = "0: copying the last action is perfect; about 2: it is useless"
     print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
@@ -471,13 +465,9 @@ def run(args):
     make_env(args.env, args.frame_skip)
     # Section 8.3's learning rates: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (the rest too).
     if args.learning_rate is None:
-        args.learning_rate = 1e-4
-        if args.env.startswith("Hopper"):
-            args.learning_rate = 1e-5
+        args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
     demos, meta = load_demos(args, env)
-    output_dir = args.output_dir
-    if output_dir is None:
-        output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
+    output_dir = args.output_dir or f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
     os.makedirs(output_dir, exist_ok=True)
 
     workers = min(args.workers or len(args.seeds), len(args.seeds))

@@ -44,21 +44,21 @@ def skip_unwritten(name):
 
 
 CEILINGS = {
-    "bc_oh": 527,
-    "bc_so": 529,
-    "history_dropout": 540,
-    "c2f": 554,
-    "fca": 632,
-    "keyframe": 624,
-    "average_ensemble": 605,
-    "dagger": 683,
-    "c2f_table3": 649,
+    "bc_oh": 517,
+    "bc_so": 519,
+    "history_dropout": 530,
+    "c2f": 544,
+    "fca": 620,
+    "keyframe": 614,
+    "average_ensemble": 597,
+    "dagger": 673,
+    "c2f_table3": 639,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns each file had when issue 55 landed, written plainly, plus issue 56's one (the
 import of torch.nn.functional, for F.mse_loss; evaluate's extra env went, make_sensor_env reads the velocities), less
 the one line each file copying UsageError lost when it moved into bc_oh's env section, plus issue 57's one (the
-summary line names its numbers: score, mean ± std), less DAgger's 14 when its checks joined run's, plus its 1 comment on the rounds' learning rate, less the ensemble's 1 (bc_oh's partially_observe call), less 2 each (the batch-size refusal in one line): a file may shrink towards its
+summary line names its numbers: score, mean ± std), less DAgger's 14 when its checks joined run's, plus its 1 comment on the rounds' learning rate, less the ensemble's 1 (bc_oh's partially_observe call), less 2 each (the batch-size refusal in one line), less about 10 each (a value chosen two ways is one conditional expression, as CleanRL's `device = ...`): a file may shrink towards its
 target (file_sizes.TARGETS; docs/contributing.md says what holds each one above it), never grow past this; lower a
 ceiling when a file shrinks"""
 
