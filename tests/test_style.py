@@ -55,12 +55,10 @@ CEILINGS = {
     "c2f_table3": 639,
     "expert_ppo": 700,
 }
-"""formatted lines at 100 columns each file had when issue 55 landed, written plainly, plus issue 56's one (the
-import of torch.nn.functional, for F.mse_loss; evaluate's extra env went, make_sensor_env reads the velocities), less
-the one line each file copying UsageError lost when it moved into bc_oh's env section, plus issue 57's one (the
-summary line names its numbers: score, mean ± std), less DAgger's 14 when its checks joined run's, plus its 1 comment on the rounds' learning rate, less the ensemble's 1 (bc_oh's partially_observe call), less 2 each (the batch-size refusal in one line), less about 10 each (a value chosen two ways is one conditional expression, as CleanRL's `device = ...`): a file may shrink towards its
-target (file_sizes.TARGETS; docs/contributing.md says what holds each one above it), never grow past this; lower a
-ceiling when a file shrinks"""
+"""formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
+gives the history of each value): a file may shrink towards its target (file_sizes.TARGETS;
+docs/contributing.md says what holds each one above it), never grow past this; lower a ceiling when a
+file shrinks"""
 
 
 @needs_ruff
