@@ -42,11 +42,11 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
     job = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
                            env=dict(os.environ, PYTHONWARNINGS="ignore", PYTHONUNBUFFERED="1"),
                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    started = []
-    for line in job.stdout:  # wait until both workers train
-        if line.startswith("seed ") and "| epoch " in line:
-            started.append(line)
-        if len({text.split(" |")[0] for text in started}) == 2:
+    started = set()
+    for line in job.stdout:  # wait until both workers train: each prints "seed S | training" when it starts a seed
+        if line.startswith("seed ") and line.rstrip().endswith("| training"):
+            started.add(line)
+        if len(started) == 2:
             break
     if how == "ctrl-c":
         os.killpg(job.pid, signal.SIGINT)
