@@ -2,9 +2,9 @@
 """C2F: a coarse MLP pi_phi on o_t gives a coarse action zeta; an MLP pi_theta encodes the history
 [o_{t-H+1}, ..., o_t]; one more layer maps that feature and sg(zeta) (a stop-gradient) to a_t.
 
-zeta, a guess of a_t from o_t alone, is easier to copy than the a_{t-1} the history reveals (the
-copycat shortcut), so the policy learns to refine zeta. Table 3's (CARLA) ablations: c2f_table3.py.
-Code marked `# Copied from bc_oh.first..last` is bc_oh.py's definitions first to last, unchanged.
+Copying zeta, a guess of a_t from o_t alone, is a simpler shortcut than recovering a_{t-1} from the
+history to copy it (the copycat shortcut, section 4): the policy learns to refine zeta. Table 3's
+ablations, on MuJoCo: c2f_table3.py. Code marked `# Copied from bc_oh.a..b` is bc_oh.py's.
 
     python c2f.py --env Hopper-v4
 """
@@ -28,7 +28,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f"
-LOSS = "Eq. 2, MSE(zeta, a_t) + MSE(final action, a_t)"
+LOSS = "Eq. 2, MSE(coarse action zeta, a_t) + MSE(final action, a_t)"
 
 
 @dataclass
@@ -104,8 +104,8 @@ class Policy(nn.Module):
         self.obs_dim = obs_dim
         # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(obs_dim, act_dim, hidden)
-        # pi_theta: section 8.3's three-layer MLP on the history, whose output is a feature, not an
-        # action (a hidden layer more than BC-OH's); split after the first, as c2f_table3.py's.
+        # pi_theta: section 8.3's three-layer MLP on the history, whose last layer outputs a feature
+        # (not an action); in two parts, as c2f_table3.py's, whose --fusion middle joins zeta there.
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
@@ -150,9 +150,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
-    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
-    history = stack_history(noisy, demos["episode_starts"], args.history)
-    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
+    observed = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
+    histories = stack_history(observed, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(histories, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
@@ -365,7 +365,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
         raise UsageError(f"{message}: see the format in README.md")
-    # A file without meta loads: it was made by someone else, at the env's own rate.
+    # A file without meta loads: it is taken to come from elsewhere, at the env's own rate.
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)
     if made_for != args.env:
@@ -410,14 +410,14 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
     # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
-    # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
+    # averaged: 0 if actions never change, 1 if copying is as good as the mean, 2 if unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
     total = len(demos["actions"])
     note = f" (the first {take} of its {total})" if take < total else ""
     print(f"demos: {take} steps from {path}{note}")
-    scale = "0: copying the last action is perfect; about 2: it is useless"
-    print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
+    scale = "0: copying a_{t-1} is exact; 1: no better than the mean action; 2: unrelated"
+    print(f"demos: copy error MSE(a_{{t-1}}, a_t)/Var(a) = {copy_error:.3f} ({scale})")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
@@ -482,7 +482,7 @@ def run(args):
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
 
-    # Bad env ids and frame skips fail here, not in a worker; the results record the defaults.
+    # Bad env ids and frame skips fail here, not in a worker; flags left None get the values used.
     env = make_env(args.env)
     velocity_dims(env, args.env)
     if args.frame_skip is None:
@@ -519,7 +519,7 @@ def run(args):
 
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)
-    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations)")
+    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations, or all if fewer)")
     for seed, entry in per_seed.items():
         print(f"{seed:>6} | {entry['score']:.1f}")
     scores = [entry["score"] for entry in per_seed.values()]

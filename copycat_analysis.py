@@ -303,7 +303,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
         raise UsageError(f"{message}: see the format in README.md")
-    # A file without meta loads: it was made by someone else, at the env's own rate.
+    # A file without meta loads: it is taken to come from elsewhere, at the env's own rate.
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)
     if made_for != args.env:
@@ -348,14 +348,14 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
     # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
-    # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
+    # averaged: 0 if actions never change, 1 if copying is as good as the mean, 2 if unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
     total = len(demos["actions"])
     note = f" (the first {take} of its {total})" if take < total else ""
     print(f"demos: {take} steps from {path}{note}")
-    scale = "0: copying the last action is perfect; about 2: it is useless"
-    print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
+    scale = "0: copying a_{t-1} is exact; 1: no better than the mean action; 2: unrelated"
+    print(f"demos: copy error MSE(a_{{t-1}}, a_t)/Var(a) = {copy_error:.3f} ({scale})")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 

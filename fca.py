@@ -212,9 +212,9 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     # The policy sees partial observations (section 5.1), stacked into a history of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
-    noisy = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
-    history = stack_history(noisy, demos["episode_starts"], args.history)
-    inputs = torch.as_tensor(history, dtype=torch.float32, device=device)
+    observed = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
+    histories = stack_history(observed, demos["episode_starts"], args.history)
+    inputs = torch.as_tensor(histories, dtype=torch.float32, device=device)
     targets = torch.as_tensor(demos["actions"], dtype=torch.float32, device=device)
     # D's targets, the previous actions, and its error if it predicted a_{t-1} = a_t.
     previous = previous_actions(demos["actions"], demos["episode_starts"])
@@ -441,7 +441,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
         raise UsageError(f"{message}: see the format in README.md")
-    # A file without meta loads: it was made by someone else, at the env's own rate.
+    # A file without meta loads: it is taken to come from elsewhere, at the env's own rate.
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)
     if made_for != args.env:
@@ -486,14 +486,14 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
 
     # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
-    # then averaged. It is 0 if actions never change, about 2 if they are unrelated.
+    # averaged: 0 if actions never change, 1 if copying is as good as the mean, 2 if unrelated.
     step_error = ((actions[1:] - actions[:-1])[~starts[1:]] ** 2).mean(0)
     copy_error = (step_error / np.maximum(actions.var(0), 1e-12)).mean()
     total = len(demos["actions"])
     note = f" (the first {take} of its {total})" if take < total else ""
     print(f"demos: {take} steps from {path}{note}")
-    scale = "0: copying the last action is perfect; about 2: it is useless"
-    print(f"demos: copy error MSE(a_t-1, a_t)/Var(a) = {copy_error:.3f} ({scale})")
+    scale = "0: copying a_{t-1} is exact; 1: no better than the mean action; 2: unrelated"
+    print(f"demos: copy error MSE(a_{{t-1}}, a_t)/Var(a) = {copy_error:.3f} ({scale})")
     return {"observations": obs, "actions": actions, "episode_starts": starts}, meta
 
 
@@ -558,7 +558,7 @@ def run(args):
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
 
-    # Bad env ids and frame skips fail here, not in a worker; the results record the defaults.
+    # Bad env ids and frame skips fail here, not in a worker; flags left None get the values used.
     env = make_env(args.env)
     velocity_dims(env, args.env)
     if args.frame_skip is None:
@@ -595,7 +595,7 @@ def run(args):
 
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)
-    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations)")
+    print(f"\n{'seed':>6} | score (mean return of the last 3 evaluations, or all if fewer)")
     for seed, entry in per_seed.items():
         print(f"{seed:>6} | {entry['score']:.1f}")
     scores = [entry["score"] for entry in per_seed.values()]

@@ -62,7 +62,7 @@ def test_bc_oh_smoke_run_loads_the_made_demos_and_reports(tmp_path):
     workdir = link_experts(tmp_path)
     made = (workdir / "demos" / "Hopper-v4_300.npz").stat().st_mtime_ns
     result = smoke("bc_oh.py", workdir)
-    assert result.stdout.startswith("demos: 300 steps from demos/Hopper-v4_300.npz\ndemos: copy error MSE(a_t-1, a_t)/Var(a) = ")
+    assert result.stdout.startswith("demos: 300 steps from demos/Hopper-v4_300.npz\ndemos: copy error MSE(a_{t-1}, a_t)/Var(a) = ")
     assert (workdir / "demos" / "Hopper-v4_300.npz").stat().st_mtime_ns == made, "it only loads the file, never rewrites it"
     assert "seed 1 | training" in result.stdout.splitlines()
     assert re.search(r"^seed 1 \| epoch 2/2 \| loss \d+\.\d+ \| last eval \d+\.\d \| \d+\.\d+ ms/step \| \d+\.\d min left$", result.stdout, re.M)

@@ -120,9 +120,9 @@ def test_the_copy_error_line_against_hand_computed_values(tmp_path, capsys):
         return next(line for line in capsys.readouterr().out.splitlines() if "copy error" in line)
 
     alternating = np.repeat((np.arange(40) % 2 - (np.arange(40) >= 20))[:, None], 3, axis=1).astype(np.float32)
-    assert "copy error MSE(a_t-1, a_t)/Var(a) = 2.000 (0: copying" in copy_error_line(alternating)
+    assert "copy error MSE(a_{t-1}, a_t)/Var(a) = 2.000 (0: copying" in copy_error_line(alternating)
     ramp = np.repeat((np.arange(40) / 39)[:, None], 3, axis=1).astype(np.float32)
-    assert "copy error MSE(a_t-1, a_t)/Var(a) = 0.008 (0: copying" in copy_error_line(ramp)
+    assert "copy error MSE(a_{t-1}, a_t)/Var(a) = 0.008 (0: copying" in copy_error_line(ramp)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -136,7 +136,7 @@ def meta_of(path) -> dict:
 
 def reported_copy_error(out: str) -> float:
     line = next(line for line in out.splitlines() if line.startswith("demos: copy error"))
-    return float(line.split("copy error MSE(a_t-1, a_t)/Var(a) = ")[1].split()[0])
+    return float(line.split("copy error MSE(a_{t-1}, a_t)/Var(a) = ")[1].split()[0])
 
 
 def test_demos_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):

@@ -149,14 +149,14 @@ def test_the_progress_lines_say_what_their_numbers_are(tmp_path, monkeypatch, ca
     header names the score."""
     import c2f
 
-    for module, loss in ((bc_oh, "MSE to the expert's actions"), (c2f, "Eq. 2, MSE(zeta, a_t) + MSE(final action, a_t)")):
+    for module, loss in ((bc_oh, "MSE to the expert's actions"), (c2f, "Eq. 2, MSE(coarse action zeta, a_t) + MSE(final action, a_t)")):
         path = tmp_path / f"{module.METHOD}.npz"
         np.savez(path, **fake_demos(256))
         skip_evaluation(monkeypatch, module, 4.0)
         module.run(tiny_args(module, demos=str(path), output_dir=str(tmp_path / module.METHOD)))
         out = capsys.readouterr().out.splitlines()
         assert f"progress lines: loss = {loss}; last eval = the mean return of the latest evaluation" in out
-        assert "  seed | score (mean return of the last 3 evaluations)" in out
+        assert "  seed | score (mean return of the last 3 evaluations, or all if fewer)" in out
 
 
 def test_missing_demos_name_the_command_that_makes_them(tmp_path, monkeypatch):

@@ -96,7 +96,7 @@ def test_num_demo_samples_with_demos_is_printed(tmp_path, monkeypatch, capsys):
     load_demos(bc_oh, demos="d.npz", num_demo_samples=120)
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == "demos: 120 steps from d.npz (the first 120 of its 300)"
-    assert lines[1].startswith("demos: copy error MSE(a_t-1, a_t)/Var(a) = ")
+    assert lines[1].startswith("demos: copy error MSE(a_{t-1}, a_t)/Var(a) = ")
 
 
 def test_a_file_without_meta_still_loads(tmp_path, monkeypatch):
