@@ -541,7 +541,7 @@ def run(args):
     workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:
         workers = 1
-    print(f"progress lines: loss = {LOSS}; last eval = the mean return of the latest evaluation")
+    print(f"progress lines: loss = {LOSS}; last eval = mean return of the ensemble, then members")
     jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
     try:
         if workers == 1:

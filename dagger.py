@@ -1,6 +1,6 @@
 # DAgger with an expert queried online (paper Table 2, "DAgger 8K"; Ross et al. 2011); see README
 """DAgger (Ross et al. 2011, section 3): BC-OH on the demonstrations (round 0), then rounds that
-roll out a beta-mix of expert and learner, aggregate the visited states the expert labels, train on.
+roll out a beta-mix of expert and learner, have the expert label its states, and train on all.
 
 The learner sees the noisy observations and their history, as in bc_oh.py; the expert labels each
 state from the clean observation. --dagger-samples labels (8000: DAgger 8K) split over the rounds.
@@ -140,7 +140,7 @@ def split_budget(total: int, rounds: int) -> list:
 def collect_round(policy, expert, args, num_labels: int, beta: float, rng, device) -> dict:
     """num_labels steps of the beta-mix: the learner's inputs, the states, the expert's labels."""
     sensor = make_sensor_env(args, int(rng.integers(2**31)))
-    # Step the env under the sensor: it returns the clean observation, which the sensor then hides.
+    # Step the wrapped env: it gives the clean observation, and sensor.observation makes it partial.
     env = sensor.env
     low = env.action_space.low
     high = env.action_space.high
@@ -204,7 +204,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     rounds = []
 
     def aggregate(round_number):
-        # Roll out the beta-mix, label its states, and rebind train_step's data to hold them too.
+        # Roll out the beta-mix, have the expert label it, and add it to the data train_step reads.
         nonlocal inputs, targets
         # Round 0 is the demos (the expert acting, beta 1); round r rolls out with a lower beta.
         beta_rounds = args.dagger_beta_rounds or args.dagger_rounds
@@ -213,7 +213,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         policy.eval()
         data = collect_round(policy, expert, args, num_labels, beta, rng, device)
         policy.train()
-        # Not redone: the policy keeps the demos' normaliser and Adam its moments; the lr restarts.
+        # Kept from round 0: the normaliser (the demos' statistics) and Adam's moments; lr restarts.
         inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
         targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
         record = {"round": round_number, "beta": beta, "labels": num_labels}

@@ -27,12 +27,12 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "fca"
-LOSS = "F's MSE to the expert's actions (adversary error: D's MSE to a_{t-1})"
+LOSS = "F's MSE to a_t, last minibatch (adversary error: D's MSE to a_{t-1}, epoch mean)"
 
 
 @dataclass
 class Args:
-    """FCA: behavioural cloning with an adversary against the copycat shortcut, on MuJoCo."""
+    """FCA: encoder G -> embedding e -> head F, against an adversary D that predicts a_{t-1}"""
 
     exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""
@@ -92,7 +92,7 @@ class Args:
 
 # ---- The method: FCA's networks G, F and D, their losses and the training loop ----
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The authors' F and D: one hidden layer, each Linear after a LeakyReLU(0.2)."""
+    """The authors' F and D: LeakyReLU(0.2) on the input, Linear, LeakyReLU(0.2), Linear."""
     layers = [nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2)]
     return nn.Sequential(*layers, nn.Linear(hidden, out_dim))
 
@@ -124,7 +124,7 @@ class Policy(nn.Module):
             blocks += [linear, nn.BatchNorm1d(hidden), nn.LeakyReLU(0.2)]
         self.encoder = nn.Sequential(*blocks, nn.Linear(hidden, embedding_dim))
         self.head = mlp(embedding_dim, act_dim, hidden)
-        # D is conditioned on the true a_t: it removes only what a_t does not already explain.
+        # D also sees the true a_t, so G sheds only what e says about a_{t-1} beyond a_t.
         self.adversary = mlp(embedding_dim + act_dim, act_dim, hidden)
         # The authors' weights_init: Xavier-uniform Linear weights, BatchNorm scales drawn from
         # N(1, 0.02^2), zero biases.
@@ -194,7 +194,7 @@ def encoder_head_step(policy: Policy, optimizer, embedding, actions, previous, w
 
 def authors_setting(env_id: str, weight: float | None, lr_ratio: float | None) -> tuple:
     """(w, D's learning rate over G's and F's): the flags, or the authors' values where None."""
-    # The authors' Hopper command used w = 2 and D at 4e-4 against G's 2e-4; elsewhere 1 and 1.
+    # The authors' Hopper command: w = 2, D's rate twice G's (4e-4 and 2e-4); elsewhere 1 and 1.
     default = 2.0 if env_id.startswith("Hopper") else 1.0
     if weight is None:
         weight = default

@@ -2,7 +2,7 @@
 """History-Dropout: BC-OH with a Dropout layer on the past frames of the history, never on o_t.
 
 Training zeroes each normalised entry of [o_{t-H+1}, ..., o_{t-1}] with probability p =
---history-dropout and scales the rest by 1/(1-p) (torch's Dropout): copying a_{t-1} is less sure.
+--history-dropout and scales the rest by 1/(1-p) (torch's Dropout): a_{t-1} is harder to read off.
 
     python history_dropout.py --env Hopper-v4
 """
@@ -72,7 +72,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     history_dropout: float = 0.5
-    """dropout rate of each past frame's entries in training, in [0, 1) (0: BC-OH)"""
+    """probability of zeroing each entry of the past frames in training, in [0, 1) (0: BC-OH)"""
 
     def __post_init__(self):
         if not 0 <= self.history_dropout < 1:

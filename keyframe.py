@@ -2,9 +2,9 @@
 """KeyFrame: BC-OH whose loss is weighted up on the keyframes, the samples where a model that
 predicts a_t from the previous actions errs most.
 
-Those are the moments where the expert's action changes: the ones a copycat policy misses. As the
-authors do, the action-prediction model is trained first (once a seed); the samples with the
-top 10% of its error (APE) weigh 5 in the behavioural-cloning loss, all others 1.
+Those are often the moments where the expert's action changes: the ones a copycat policy misses. As
+the authors do, the action-prediction model is trained first (once a seed); the samples with the top
+10% of its error (APE) weigh 5 in the behavioural-cloning loss, all others 1.
 
     python keyframe.py --env Hopper-v4
 """
@@ -34,7 +34,7 @@ LOSS = "the KeyFrame-weighted MSE to the expert's actions"
 
 @dataclass
 class Args:
-    """KeyFrame: BC-OH with the loss weighted up on keyframes, on MuJoCo (Wen et al. 2021)."""
+    """KeyFrame: BC-OH weighted up where past actions predict a_t worst (APE), on MuJoCo."""
 
     exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""
@@ -75,7 +75,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     keyframe_k: int = 4
-    """K, the previous actions the action-prediction model sees (CARLA 9, MuJoCo unpublished)"""
+    """K, how many previous actions the action-prediction model sees (the authors' CARLA: 9)"""
     keyframe_spacing: int = 1
     """steps between those actions: a_{t-Ks}, ..., a_{t-2s}, a_{t-s} (authors' CARLA code: 3)"""
     keyframe_fraction: float = 0.1
@@ -83,11 +83,11 @@ class Args:
     keyframe_weight: float = 5.0
     """loss weight of a keyframe with --weighting threshold; the other samples weigh 1"""
     weighting: Literal["threshold", "softmax"] = "threshold"
-    """threshold: --keyframe-weight on the keyframes; softmax: each batch's softmax of APE"""
+    """threshold: --keyframe-weight on the keyframes; softmax: N softmax(APE / T) in a batch of N"""
     keyframe_temperature: float = 1.0
-    """temperature of --weighting softmax"""
+    """T, the temperature of --weighting softmax, in APE's units (a squared action error)"""
     keyframe_model_epochs: int = 20
-    """passes over the demos that train the action-prediction model"""
+    """passes over the demos (minibatches of --batch-size) that train the action-prediction model"""
 
 
 # ---- The method: KeyFrame's weights, network, loss and training loop ----
@@ -140,7 +140,7 @@ def previous_actions(actions, episode_starts, k: int, spacing: int) -> np.ndarra
     """Row t holds [a_{t-Ks}, ..., a_{t-s}]; before an episode's start, its first action."""
     span = k * spacing + 1
     frames = stack_history(actions, episode_starts, span).reshape(len(actions), span, -1)
-    # Every s-th of the actions before a_t, oldest first; a_t itself is the last frame.
+    # Every s-th of the actions before a_t, oldest first: the slice stops before a_t, the last.
     return frames[:, 0 : k * spacing : spacing].reshape(len(actions), -1)
 
 
@@ -159,7 +159,7 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
         loss = F.mse_loss(model(inputs[idx]), targets[idx])
         loss.backward()
         optimizer.step()
-    # Each sample's squared error summed over the action's entries; only softmax feels its scale.
+    # Each sample's squared error summed over the action's entries; the threshold uses its rank.
     with torch.no_grad():
         return ((model(inputs) - targets) ** 2).sum(1)
 
