@@ -32,7 +32,7 @@ LOSS = "F's MSE to a_t, last minibatch (adversary error: D's MSE to a_{t-1}, epo
 
 @dataclass
 class Args:
-    """FCA: encoder G -> embedding e -> head F, against an adversary D that predicts a_{t-1}"""
+    """FCA: encoder G -> embedding e -> head F, against an adversary D predicting a_{t-1}."""
 
     exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""
