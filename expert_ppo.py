@@ -30,11 +30,11 @@ class Args:
     env: str = "Hopper-v4"
     """gymnasium MuJoCo env id (Hopper, HalfCheetah, Walker2d, Ant; v4 or v5)"""
     frame_skip: int | None = None
-    """simulator steps per action; None: the env's own (see docs/methods.md)"""
+    """simulator steps per action; None: the env's own (the expert's with --eval-only)"""
     seed: int = 1
     """training seed (python, numpy, torch, envs); demos use seed 0, final evaluations 10000+"""
     total_timesteps: int = 3_000_000
-    """env steps to train for, summed over the parallel envs, rounded up to whole rollouts"""
+    """env steps in all (a --resume's earlier ones too), summed over the envs, whole rollouts"""
     learning_rate: float = 3e-4
     """Adam learning rate, annealed linearly to zero over total-timesteps"""
     num_envs: int = 8
@@ -76,13 +76,13 @@ class Args:
     eval_only: bool = False
     """only evaluate --checkpoint, printing per-episode returns and a summary line"""
     checkpoint: str = "experts/{env}.pt"
-    """the expert --eval-only (default rate: its training one) and --make-demos (env's) roll out"""
+    """expert to roll out; default rate: its training one (--eval-only), the env's (--make-demos)"""
     eval_episodes: int = 20
     """episodes of --eval-only and of the final evaluation after training"""
     ship_to: str | None = None
     """with --eval-only: also write the checkpoint, with its evaluated return, to this path"""
     make_demos: bool = False
-    """roll --checkpoint out into demos/<env>[_fs<K>]_<N>.npz, the imitation files' demos"""
+    """roll --checkpoint out into ./demos/<env>[_fs<K>]_<N>.npz (kept if made already)"""
     num_demo_samples: int | None = None
     """with --make-demos: demo steps; None: 20000 for Hopper, 10000 otherwise (section 8.3)"""
     retarget: bool = False
@@ -162,7 +162,7 @@ def validate(args: Args):
 def train(args: Args):
     validate(args)
     native = env_frame_skip(args.env)
-    # Resolved first, so that args and checkpoints record the rate used.
+    # None becomes the env's own frame skip here, so that args and checkpoints record the rate used.
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
     rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
@@ -238,7 +238,7 @@ def train(args: Args):
             agent.load_state_dict(state["agent"])
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
-            raise UsageError(f"{cannot} ({type(error).__name__}): delete it or drop --resume")
+            raise UsageError(f"{cannot} ({type(error).__name__}): check --hidden or drop --resume")
         # state["args"] is a record only, never read back: the flags given now rule.
         for rms, name in ((obs_rms, "obs"), (ret_rms, "ret")):
             rms.mean = state[f"{name}_mean"].numpy()
@@ -344,7 +344,7 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
 
-        # ---- Progress, evaluation (ExpertPolicy, below, draws from torch's RNG), checkpoints
+        # ---- Progress, evaluation (building ExpertPolicy advances torch's RNG), checkpoints
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
@@ -674,11 +674,11 @@ def make_demos(args: Args):
     if all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    # A checkpoint never evaluated to the end (a stopped run's latest.pt) has no return.
+    # A checkpoint never evaluated to the end (a stopped run's latest.pt): no return, nor its rate.
     if meta["expert_return"] is None:
         del meta["expert_return"]
         del meta["expert_frame_skip"]
-    # One thread, as the imitation files rolled the expert out: the same digits.
+    # One thread, as the method files used when they made these demos: the same digits.
     torch.set_num_threads(1)
     print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
     demos = generate_demos(args.env, frame_skip, expert, num_samples)
