@@ -1,11 +1,11 @@
 # C2F's ablations (paper Table 3, section 5.3: CARLA there) and a capacity control; see README.md
-"""c2f.py with the choices of Table 3 open, each flag an ablation of one part of C2F. At its
-defaults this file is c2f.py: the same model, the same weights, the same printed digits.
+"""c2f.py with Table 3's choices open as flags, and two other readings and a capacity control. At
+its defaults this file is c2f.py: the same model, the same weights, the same printed digits.
 
     --fusion              where sg(zeta) joins the policy model: late, into the last layer (c2f.py's
                           reading of the paper); Table 3's middle, into pi_theta's second layer, and
                           early, beside the input frames; output and penultimate, two other readings
-                          (section 8.3: "to the output of policy model"; 5.1: "penultimate FC")
+                          (section 8.3: "to the output of policy model"; 8.2: "penultimate FC")
     --coarse-output       feature: the coarse model's last hidden feature ("ResNet output as zeta")
     --coarse-input        history: the coarse model reads the whole history ("BC-OH as pi_phi,
                           BC-OH as pi_theta"; with --policy-input current, "..., BC-SO as pi_theta")
@@ -83,7 +83,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
-    """where sg(zeta) joins pi_theta: late (the paper's), output, middle, early, penultimate"""
+    """where sg(zeta) joins pi_theta: late (c2f.py's reading), output, middle, early, penultimate"""
     coarse_output: Literal["action", "feature"] = "action"
     """what the coarse model passes on: its action zeta (the paper's) or its last hidden feature"""
     coarse_input: Literal["current", "history"] = "current"
@@ -101,6 +101,10 @@ class Args:
         if self.two_stage and not self.coarse_action:
             both = "--two-stage trains the coarse model first, --no-coarse-action never uses it"
             raise UsageError(f"{both}: pass one of them")
+        # A frozen or unused coarse model gets no gradient from the final action's loss anyway.
+        if not self.stop_gradient and (self.two_stage or not self.coarse_action):
+            moot = "--no-stop-gradient changes nothing with --two-stage or --no-coarse-action"
+            raise UsageError(f"{moot}: leave it out")
 
 
 # ---- The method: C2F's networks, loss and training loop, with Table 3's ablations ----
@@ -143,7 +147,7 @@ class Policy(nn.Module):
         fed_dim = act_dim
         if args.coarse_output == "feature":
             fed_dim = args.hidden
-        # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
+        # pi_theta as in c2f.py: three hidden layers (BC-OH's MLP has two); split after the first.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim
@@ -152,7 +156,7 @@ class Policy(nn.Module):
         if args.fusion == "middle":
             second_in += fed_dim
         layers = [nn.Linear(second_in, args.hidden), nn.ReLU()]
-        # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
+        # A third hidden layer, except: output's third layer gives an action, penultimate has none.
         if args.fusion == "output":
             layers.append(nn.Linear(args.hidden, act_dim))
         elif args.fusion != "penultimate":

@@ -304,7 +304,7 @@ def record_stages(monkeypatch) -> list:
 def test_two_stage_trains_the_coarse_model_first_then_leaves_it_unchanged(monkeypatch, capsys):
     """Stage 1 and stage 2 are two runs of the one training loop, fit: the first trains only the coarse model."""
     calls = record_stages(monkeypatch)
-    final, lines = train(c2f_table3, monkeypatch, capsys, two_stage=True, stop_gradient=False)  # no sg: only freezing protects it
+    final, lines = train(c2f_table3, monkeypatch, capsys, two_stage=True)
     assert [evaluates for evaluates, _, _ in calls] == [False, True], "stage 1 does not evaluate, stage 2 does"
     (_, initial, after_one), (_, _, after_two) = calls
     coarse = [name for name in final if name.startswith("coarse.")]
@@ -339,6 +339,17 @@ def test_two_stage_without_the_coarse_action_is_refused_as_the_flags_are_parsed(
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(c2f_table3.UsageError, match="--two-stage trains the coarse model first"):
         tiny_args(c2f_table3, two_stage=True, coarse_action=False)
+
+
+@pytest.mark.parametrize("other", ["--two-stage", "--no-coarse-action"])
+def test_no_stop_gradient_is_refused_where_it_would_change_nothing(tmp_path, other):
+    """A frozen (--two-stage) or unused (--no-coarse-action) coarse model gets no gradient from the final action's
+    loss, so --no-stop-gradient would silently give the digits of the run without it: refused in one line."""
+    tiny = ["--seeds", "1", "--epochs", "1", "--eval-episodes", "1", "--output-dir", tmp_path / "out"]
+    result = run_in_process("c2f_table3.py", "--no-stop-gradient", other, *tiny)
+    assert_usage_error(result, "--no-stop-gradient changes nothing with --two-stage or --no-coarse-action: leave it out")
+    with pytest.raises(c2f_table3.UsageError, match="--no-stop-gradient changes nothing"):
+        tiny_args(c2f_table3, stop_gradient=False, two_stage=other == "--two-stage", coarse_action=other != "--no-coarse-action")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -52,7 +52,7 @@ CEILINGS = {
     "keyframe": 614,
     "average_ensemble": 597,
     "dagger": 673,
-    "c2f_table3": 639,
+    "c2f_table3": 643,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
