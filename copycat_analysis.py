@@ -490,7 +490,7 @@ class C2FPolicy(nn.Module):
         fed_dim = act_dim
         if args.coarse_output == "feature":
             fed_dim = args.hidden
-        # pi_theta: three hidden layers, one more than BC-OH's MLP (c2f.py); split after the first.
+        # pi_theta as in c2f.py: three hidden layers (BC-OH's MLP has two); split after the first.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim
@@ -499,7 +499,7 @@ class C2FPolicy(nn.Module):
         if args.fusion == "middle":
             second_in += fed_dim
         layers = [nn.Linear(second_in, args.hidden), nn.ReLU()]
-        # A third layer, but output ends in an action and penultimate stops: each is BC-OH's MLP.
+        # A third hidden layer, except: output's third layer gives an action, penultimate has none.
         if args.fusion == "output":
             layers.append(nn.Linear(args.hidden, act_dim))
         elif args.fusion != "penultimate":
