@@ -31,7 +31,7 @@ LOSS = "MSE to the expert's actions"
 
 @dataclass
 class Args:
-    """BC-SO: behavioural cloning from the current observation alone, on MuJoCo (section 5.1)."""
+    """BC-SO: behavioural cloning from o_t alone, on MuJoCo (section 5.1); --history is unused."""
 
     exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""

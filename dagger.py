@@ -32,7 +32,7 @@ LOSS = "MSE to the expert's labels (the demos', then the rounds')"
 
 @dataclass
 class Args:
-    """DAgger: BC-OH, then rounds of states labelled online by an expert (paper Table 2)."""
+    """DAgger: BC-OH for --epochs, then rounds of states labelled online by an expert (Table 2)."""
 
     exp_name: str = Path(__file__).stem
     """the name of this experiment, part of the default output folder"""
