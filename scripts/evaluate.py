@@ -8,8 +8,8 @@ its policy with the file's own make_policy (on zero inputs of the saved shape: l
 restores the weights and the normaliser's statistics) and runs the file's own evaluate on the env,
 control rate and partial observability recorded in the checkpoint; it prints every return and the
 summary line. A run's evaluation after epoch E of training seed S used --seed 10000 * S + E with
---episodes = its --eval-episodes (DAgger's final learner: three evaluations, + 0, E and 2E episodes on):
-that seed reproduces it exactly (on a CPU). scripts/watch.py renders saved policies to a GIF.
+--episodes = its --eval-episodes (DAgger's final learner: three evaluations, + 0, N and 2N episodes on,
+N = --eval-episodes): that seed reproduces it exactly (on a CPU). scripts/watch.py renders saved policies to a GIF.
 """
 import importlib
 import re
