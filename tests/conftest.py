@@ -74,6 +74,23 @@ def make_demos(env="Hopper-v4", num_samples=300, frame_skip=None) -> Path:
     return path
 
 
+DEMOS_MADE_IN_MODE = {}
+"""(environment variables, flags) -> the demos/ folder demos_made_in made with them"""
+
+
+def demos_made_in(numeric_env: dict, *flags) -> Path:
+    """The demos/ folder that `expert_ppo.py --make-demos *flags` writes when it runs with the environment variables
+    numeric_env (e.g. MKL_CBWR=COMPATIBLE, which MKL reads when it loads: so in a subprocess, not in this process).
+    Made once a test process for each (numeric_env, flags); link it into a run's folder, never write into it."""
+    key = (tuple(sorted(numeric_env.items())), tuple(map(str, flags)))
+    if key not in DEMOS_MADE_IN_MODE:
+        folder = link_experts(tempfile.mkdtemp(prefix="made-in-mode-", dir=DEMO_CACHE), demos=False)
+        made = run_script("expert_ppo.py", "--make-demos", *flags, cwd=folder, env=numeric_env)
+        assert made.returncode == 0, made.stderr
+        DEMOS_MADE_IN_MODE[key] = folder / "demos"
+    return DEMOS_MADE_IN_MODE[key]
+
+
 def link_experts(directory, demos=True):
     """Symlink REPO_ROOT/experts into `directory` (a run's cwd) and, unless demos is False, the session's demo files
     (DEMOS_TESTS_USE, made by make_demos) as its demos/ folder; return the directory."""

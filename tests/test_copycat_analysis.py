@@ -17,7 +17,7 @@ import tyro
 import c2f
 import c2f_table3
 import copycat_analysis as ca
-from conftest import assert_usage_error, link_experts, make_demos, run_script
+from conftest import assert_usage_error, link_experts, make_demos, run_in_process, run_script
 
 OBS, ACT, H = 4, 2, 2
 W = np.array([[1.0, -0.5, 0.3, 0.0], [0.2, 0.8, -1.0, 0.5]])  # the hand-made expert: a_t = W o_t
@@ -207,9 +207,10 @@ def test_the_control_and_c2f_in_each_others_place_are_refused(saved, monkeypatch
     assert "trained without --no-coarse-action: pass C2F's own model as --c2f" in bad_run(workdir, paths, monkeypatch, control=str(paths["c2f"]))
 
 
-def test_a_model_of_another_method_is_rejected_in_one_line(saved):
+def test_a_model_of_another_method_is_rejected_in_one_line(saved, monkeypatch):
     workdir, paths = saved
-    result = run_script("copycat_analysis.py", *model_flags(paths, bc_so=paths["c2f"]), cwd=workdir)
+    monkeypatch.chdir(workdir)
+    result = run_in_process("copycat_analysis.py", *model_flags(paths, bc_so=paths["c2f"]))
     assert result.returncode == 2
     assert_usage_error(result, "is a c2f model, not bc_so")
 

@@ -128,8 +128,9 @@ def test_a_bad_checkpoint_is_refused_in_one_line(trained, tmp_path, case):
     assert_usage_error(result, message)
 
 
-def test_the_command_refuses_a_damaged_checkpoint_with_exit_2_and_no_traceback(trained, tmp_path):
-    result = run_script("scripts/evaluate.py", damaged(trained("bc_oh")[0], tmp_path), "--seed", 3)
+def test_the_command_refuses_a_damaged_checkpoint_with_exit_2_and_no_traceback(trained, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process("scripts/evaluate.py", damaged(trained("bc_oh")[0], tmp_path), "--seed", 3)
     assert result.returncode == 2 and result.stdout == ""
     assert_usage_error(result, "damaged.pt is not a readable checkpoint")
 

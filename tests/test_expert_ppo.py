@@ -135,10 +135,12 @@ def test_shipped_expert_scores_well():
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
          "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda"],
 )
-def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path):
+def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkeypatch):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
     args = [str(arg).format(tiny=checkpoint) for arg in args]
-    result = run_script("expert_ppo.py", *args, "--output-dir", tmp_path / "run", cwd=tmp_path)
+    monkeypatch.chdir(tmp_path)
+    # In this process (a tenth of a second, not three); --max-minutes bounds the run should a check stop working.
+    result = run_in_process("expert_ppo.py", *args, "--output-dir", tmp_path / "run", "--max-minutes", 0.01)
     assert_usage_error(result, message)
     assert result.returncode == 2
     assert not (tmp_path / "run").exists()  # failed before training started
@@ -258,7 +260,7 @@ def test_resume_at_another_frame_skip_is_refused(tiny_run, tmp_path):
     run_dir = tmp_path / "run"
     shutil.copytree(tiny_run[0], run_dir)
     before = (run_dir / "latest.pt").read_bytes()
-    result = run_script("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--output-dir", run_dir, "--resume", "--frame-skip", 1)
+    result = run_in_process("expert_ppo.py", "--total-timesteps", 6144, *TINY, "--output-dir", run_dir, "--resume", "--frame-skip", 1)
     assert_usage_error(result, "was trained at frame skip 4, not 1")
     assert result.returncode == 2
     assert (run_dir / "latest.pt").read_bytes() == before
@@ -276,9 +278,9 @@ def test_retarget_ships_an_expert_for_another_version_of_its_env(tmp_path):
     assert checkpoint["eval_return"] > 3000
     expert_ppo.load_expert(str(shipped), "Hopper-v5")  # accepted for v5 now
     for env, checkpoint_env in (("Walker2d-v5", "Hopper-v4"), ("HalfCheetah-v5", "Ant-v4")):
-        refused = run_script("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
+        refused = run_in_process("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
         assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other shapes than {env}'s: train one for {env}")
-    without = run_script("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
+    without = run_in_process("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
     assert_usage_error(without, "is an expert for Hopper-v4, not Hopper-v5")
 
 

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from conftest import assert_usage_error, fake_demos, link_experts, run_in_process, run_script, skip_evaluation, tiny_args
+from conftest import assert_usage_error, demos_made_in, fake_demos, link_experts, run_in_process, run_script, skip_evaluation, tiny_args
 import pytest
 from test_pinned_output import BUDGET, FIXED_MODE, LIBM_AS_PINNED, PINNED
 
@@ -14,14 +14,11 @@ TWO_SEEDS = (*BUDGET[:BUDGET.index("--seeds")], *BUDGET[BUDGET.index("--seeds") 
 """test_pinned_output's tiny budget, with two seeds"""
 
 
-@pytest.fixture(scope="module")
-def fixed_mode_demos(tmp_path_factory):
+@pytest.fixture
+def fixed_mode_demos():
     """The demos of the pins, made as test_pinned_output makes them: by expert_ppo.py --make-demos in the fixed mode
     (the session's demo files are made in the default mode, whose last digits differ by CPU)."""
-    folder = link_experts(tmp_path_factory.mktemp("fixed_mode_demos"), demos=False)
-    made = run_script("expert_ppo.py", *BUDGET[:2], "--make-demos", *BUDGET[-2:], cwd=folder, env=FIXED_MODE)
-    assert made.returncode == 0, made.stderr
-    return folder / "demos"
+    return demos_made_in(FIXED_MODE, *BUDGET[:2], *BUDGET[-2:])
 
 
 def tiny_run(folder, script: str, workers: int, demos) -> tuple:

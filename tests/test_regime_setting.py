@@ -59,10 +59,11 @@ def test_default_and_native_frame_skip_are_the_plain_env():
         assert not isinstance(env, gym.wrappers.TransformReward) and env.spec.max_episode_steps == 1000
 
 
-def test_frame_skip_needs_a_mujoco_env_and_a_positive_value(tmp_path):
+def test_frame_skip_needs_a_mujoco_env_and_a_positive_value(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     with pytest.raises(bc_oh.UsageError, match="not a MuJoCo env"):
         bc_oh.make_env("Pendulum-v1", 1)
-    assert_usage_error(run_script("bc_oh.py", "--frame-skip", "0", cwd=tmp_path), "--frame-skip must be positive")
+    assert_usage_error(run_in_process("bc_oh.py", "--frame-skip", "0"), "--frame-skip must be positive")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -183,13 +184,14 @@ def test_make_demos_refuses_a_frame_skip_the_env_cannot_take(flags, message, tmp
     assert result.returncode == 2 and not (tmp_path / "demos").exists(), "refused before any rollout"
 
 
-def test_demos_of_another_rate_are_refused(tmp_path):
+def test_demos_of_another_rate_are_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     link_experts(tmp_path)
     made = run_script("bc_oh.py", "--frame-skip", "1", "--num-demo-samples", 120, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
                       "--seeds", 1, "--output-dir", tmp_path / "out", cwd=tmp_path)
     assert made.returncode == 0, made.stderr
     assert made.stdout.splitlines()[-1].startswith("Hopper-v4 bc_oh: "), made.stdout
-    result = run_script("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1, cwd=tmp_path)
+    result = run_in_process("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1)
     assert_usage_error(result, "Hopper-v4_fs1_120.npz was made at frame skip 1, not 4: pass --frame-skip 1")
     summary = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert (summary["args"]["frame_skip"], summary["args"]["hide_velocities"]) == (1, False)
@@ -261,11 +263,12 @@ def test_a_method_file_runs_on_v5_envs_with_the_shipped_experts(tmp_path, env):
     assert bc_oh.velocity_dims(gym.make(env), env) == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
 
 
-def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(tmp_path):
+def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(tmp_path, monkeypatch):
     """A user's demo file with no meta (no frame_skip record) is native: at --frame-skip 1 it is refused in one line."""
+    monkeypatch.chdir(tmp_path)
     rng = np.random.default_rng(0)
     path = tmp_path / "user.npz"
     np.savez(path, observations=rng.normal(size=(200, 11)), actions=rng.uniform(-1, 1, (200, 3)).astype(np.float32),
              episode_starts=np.arange(200) % 50 == 0)
-    assert_usage_error(run_script("bc_oh.py", "--demos", path, "--frame-skip", 1, "--epochs", 1, cwd=tmp_path),
+    assert_usage_error(run_in_process("bc_oh.py", "--demos", path, "--frame-skip", 1, "--epochs", 1),
                        "user.npz was made at frame skip 4, not 1: pass --frame-skip 4")
