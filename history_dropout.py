@@ -26,7 +26,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "history_dropout"
-LOSS = "MSE to the expert's actions"
+LOSS = "MSE to the expert's actions, with the past frames' Dropout on"
 
 
 @dataclass
@@ -100,20 +100,19 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """History-Dropout: BC-OH whose past frames, not o_t, pass a Dropout layer after normalising."""
+    """History-Dropout: BC-OH whose normalised past frames, not o_t, pass Dropout in training."""
 
     def __init__(self, obs_dim, act_dim, history, hidden, rate, inputs):
         super().__init__()
         self.normalize = Normalizer(inputs)
-        # The first (H - 1) * obs_dim entries are the past frames; Dropout is off after eval().
-        self.past = (history - 1) * obs_dim
+        self.past_entries = (history - 1) * obs_dim
         self.dropout = nn.Dropout(rate)
         self.net = mlp(obs_dim * history, act_dim, hidden)
 
     def forward(self, obs_history):
         x = self.normalize(obs_history)
-        past = self.dropout(x[..., : self.past])
-        current = x[..., self.past :]
+        past = self.dropout(x[..., : self.past_entries])
+        current = x[..., self.past_entries :]
         return self.net(torch.cat([past, current], dim=-1))
 
 

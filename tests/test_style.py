@@ -46,7 +46,7 @@ def skip_unwritten(name):
 CEILINGS = {
     "bc_oh": 517,
     "bc_so": 519,
-    "history_dropout": 530,
+    "history_dropout": 529,
     "c2f": 544,
     "fca": 620,
     "keyframe": 614,
