@@ -11,7 +11,6 @@ import hashlib
 import json
 import os
 import platform
-import random
 import re
 import sys
 import time
@@ -168,7 +167,6 @@ def train(args: Args):
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
     latest_path = os.path.join(output_dir, "latest.pt")
     best_path = os.path.join(output_dir, "best.pt")
-    random.seed(args.seed)
     np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
@@ -380,8 +378,9 @@ def train(args: Args):
     mean = float(np.mean(returns))
     std = float(np.std(returns))
     save_atomically(checkpoint(mean), latest_path)
-    best = f"{best_path} keeps the best periodic evaluation ({best_return:.1f})"
-    print(f"wrote {latest_path} (last); {best}")
+    print(f"wrote {latest_path} (the last policy)")
+    if best_return > -np.inf:
+        print(f"{best_path} keeps the best periodic evaluation ({best_return:.1f})")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
 
 
