@@ -1,25 +1,32 @@
-# Causal diagnostics of the copycat shortcut for saved BC-SO, BC-OH and C2F models (paper section 5.4, H3); see README.md
-"""Interventions that show whether a policy copies the previous action instead of reading the current frame.
+# Causal diagnostics of the copycat shortcut for saved BC-SO, BC-OH and C2F models
+# (paper section 5.4, H3); see README.md
+"""Interventions that show whether a policy copies the previous action instead of reading the
+current frame.
 
-Loads the models that bc_so.py, bc_oh.py and c2f.py write with --save-model for one env (C2F's may also be
-c2f_table3.py's, with --coarse-output action) and, on held-out
-expert demonstrations (with fresh velocity noise) and on each policy's own rollouts in the noisy env, measures
+Loads the models that bc_so.py, bc_oh.py and c2f.py write with --save-model for one env (C2F's
+may also be c2f_table3.py's, with --coarse-output action) and, on held-out expert demonstrations
+(with fresh velocity noise) and on each policy's own rollouts in the noisy env, measures
 
-1. do(o_hist) = [o_t, ..., o_t]: how far each policy's action moves when its history is replaced by the
-   current frame repeated (mean |change| per action dim / the demo actions' std), and how often the real
-   history pulls the action towards the previous action a_{t-1};
-2. do(zeta), C2F only: CE_d = |pi_theta(o_hist, do(zeta_d = lo_d))_d - pi_theta(o_hist, do(zeta_d = hi_d))_d|
-   per action dim d, the other zeta dims left at the coarse model's output, lo_d / hi_d the 5th / 95th
-   percentiles of the demo actions;
-3. the copycat score on held-out demos: at action changepoints (top decile of |a_t - a_{t-1}|), the fraction
-   of predictions closer to a_{t-1} than to a_t.
+1. do(o_hist) = [o_t, ..., o_t]: how far each policy's action moves when its history is replaced
+   by the current frame repeated (mean |change| per action dim / the demo actions' std), and how
+   often the real history pulls the action towards the previous action a_{t-1};
+2. do(zeta), C2F only:
+   CE_d = |pi_theta(o_hist, do(zeta_d = lo_d))_d - pi_theta(o_hist, do(zeta_d = hi_d))_d|
+   per action dim d, the other zeta dims left at the coarse model's output, lo_d / hi_d the
+   5th / 95th percentiles of the demo actions;
+3. the copycat score on held-out demos: at action changepoints (top decile of |a_t - a_{t-1}|),
+   the fraction of predictions closer to a_{t-1} than to a_t.
 
 It prints a table and writes the pictures and a JSON report to --output-dir.
 
-    python bc_so.py --env Hopper-v4 --seeds 1 --save-model --output-dir runs/bc_so/Hopper-v4   # likewise bc_oh.py, c2f.py
-    python copycat_analysis.py --env Hopper-v4                 # reads runs/<method>/Hopper-v4/seed1.pt
-    python c2f_table3.py --env Hopper-v4 --seeds 1 --no-coarse-action --save-model --output-dir runs/c2f_no_coarse/Hopper-v4
-    python copycat_analysis.py --env Hopper-v4 --control runs/c2f_no_coarse/Hopper-v4/seed1.pt   # and the capacity control
+    # Likewise bc_oh.py and c2f.py:
+    python bc_so.py --env Hopper-v4 --seeds 1 --save-model --output-dir runs/bc_so/Hopper-v4
+    # Reads runs/<method>/Hopper-v4/seed1.pt:
+    python copycat_analysis.py --env Hopper-v4
+    # And the capacity control (the first command is one line, wrapped here):
+    python c2f_table3.py --env Hopper-v4 --seeds 1 --no-coarse-action --save-model
+        --output-dir runs/c2f_no_coarse/Hopper-v4
+    python copycat_analysis.py --env Hopper-v4 --control runs/c2f_no_coarse/Hopper-v4/seed1.pt
 """
 
 import json
@@ -31,18 +38,19 @@ from typing import Optional
 
 import gymnasium as gym
 import matplotlib
+import matplotlib.pyplot as plt
 import mujoco
 import numpy as np
 import torch
 import torch.nn as nn
 import tyro
 
-matplotlib.use("Agg")  # files only, no display
-import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
+# Files only, no display. pyplot chooses no backend when it is imported, so choosing Agg here
+# still comes before any figure is made.
+matplotlib.use("Agg")
 
-gym.logger.min_level = (
-    gym.logger.ERROR
-)  # the paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors
+# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+gym.logger.min_level = gym.logger.ERROR
 
 
 # Copied from bc_oh.print_mujoco_warning
@@ -54,7 +62,8 @@ def print_mujoco_warning(text: str):
 
 mujoco.set_mju_user_warning(print_mujoco_warning)
 METHODS = ("bc_so", "bc_oh", "c2f")
-CONTROL = "c2f_no_coarse"  # the capacity control, c2f_table3.py --no-coarse-action: C2F's network, zeros in place of zeta
+# The capacity control, c2f_table3.py --no-coarse-action: C2F's network, zeros in place of zeta.
+CONTROL = "c2f_no_coarse"
 C2F_METHODS = ("c2f", "c2f_table3")
 """the method files whose models load as C2F (c2f.py's are c2f_table3.py's at its defaults)"""
 TABLE3_DEFAULTS = {
@@ -66,7 +75,8 @@ TABLE3_DEFAULTS = {
     "coarse_action": True,
     "two_stage": False,
 }
-"""c2f_table3.py's ablation flags at their defaults, the paper's C2F: what c2f.py's models record none of"""
+"""c2f_table3.py's ablation flags at their defaults, the paper's C2F: what c2f.py's models record
+none of"""
 COLORS = {"bc_so": "tab:blue", "bc_oh": "tab:red", "c2f": "tab:green", CONTROL: "tab:gray"}
 
 
@@ -79,29 +89,37 @@ class Args:
     bc_oh: str = "runs/bc_oh/{env}/seed1.pt"
     """BC-OH model written by `bc_oh.py --save-model`"""
     c2f: str = "runs/c2f/{env}/seed1.pt"
-    """C2F model written by `c2f.py --save-model` (or by `c2f_table3.py --save-model` with --coarse-output action, the default)"""
+    """C2F model written by `c2f.py --save-model` (or by `c2f_table3.py --save-model` with
+    --coarse-output action, the default)"""
     control: Optional[str] = None
-    """optional fourth model: the capacity control, `c2f_table3.py --no-coarse-action --save-model` (do(o_hist) and the copycat score only: it reads no zeta)"""
+    """optional fourth model: the capacity control, `c2f_table3.py --no-coarse-action --save-model`
+    (do(o_hist) and the copycat score only: it reads no zeta)"""
     demos: Optional[str] = None
-    """held-out demonstrations (.npz as `expert_ppo.py --make-demos` writes, read as the method files read theirs, whole); default: a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
+    """held-out demonstrations (.npz as `expert_ppo.py --make-demos` writes, read as the method
+    files read theirs, whole); default: a fresh expert rollout from reset seed --seed (the training
+    demos use seed 0), not cached"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that generates the held-out demos when --demos is not given"""
     num_demo_samples: int = 5000
     """held-out demo steps to generate when --demos is not given"""
     obs_noise_std: Optional[float] = None
-    """std of the velocity noise on the demos' and the rollouts' observations (default: the models' training value)"""
+    """std of the velocity noise on the demos' and the rollouts' observations (default: the models'
+    training value)"""
     history: Optional[int] = None
     """frames in the history (default: the models'; it must be the BC-OH and C2F models' own)"""
     eval_episodes: int = 3
     """rollout episodes of each policy in the partially observed env"""
     zeta_quantile: float = 0.05
-    """do(zeta_d) = lo_d / hi_d: the q and 1-q quantiles of the demo actions of dim d (0: their min and max)"""
+    """do(zeta_d) = lo_d / hi_d: the q and 1-q quantiles of the demo actions of dim d (0: their min
+    and max)"""
     changepoint_quantile: float = 0.9
-    """changepoints of the copycat score: the steps whose |a_t - a_{t-1}| is above this quantile (0.9: the top decile)"""
+    """changepoints of the copycat score: the steps whose |a_t - a_{t-1}| is above this quantile
+    (0.9: the top decile)"""
     output_dir: str = "analysis/{env}"
     """where the pictures and the JSON report are written"""
     seed: int = 1
-    """seed of the held-out demos (not 0, the training demos' seed), of their noise and of the rollouts"""
+    """seed of the held-out demos (not 0, the training demos' seed), of their noise and of the
+    rollouts"""
 
 
 # Copied from bc_oh.UsageError
@@ -360,12 +378,12 @@ def load_demos(args, env: gym.Env) -> tuple:
 
 
 def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
-    """--demos, checked as the method files check theirs (its env, rate, arrays, shapes, values), or a fresh
-    expert rollout from reset seed --seed: states the policies were not trained on."""
-    if args.demos is not None:  # the whole file; batch_size 1: any file of two steps or more
-        rate = frame_skip or getattr(
-            env.unwrapped, "frame_skip", None
-        )  # the models' rate (None: the env's own)
+    """--demos, checked as the method files check theirs (its env, rate, arrays, shapes, values),
+    or a fresh expert rollout from reset seed --seed: states the policies were not trained on."""
+    # The whole file; batch_size 1: any file of two steps or more.
+    if args.demos is not None:
+        # The models' rate (None: the env's own).
+        rate = frame_skip or getattr(env.unwrapped, "frame_skip", None)
         given = SimpleNamespace(
             env=args.env, demos=args.demos, num_demo_samples=None, batch_size=1, frame_skip=rate
         )
@@ -381,10 +399,12 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
         raise UsageError(
-            f"no expert for {args.env} at {expert_path}: pass --expert, or held-out demos with --demos"
+            f"no expert for {args.env} at {expert_path}: "
+            "pass --expert, or held-out demos with --demos"
         )
     print(
-        f"generating {args.num_demo_samples} held-out demonstration steps with {expert_path} (reset seed {args.seed})"
+        f"generating {args.num_demo_samples} held-out demonstration steps with {expert_path} "
+        f"(reset seed {args.seed})"
     )
     return generate_demos(
         args.env,
@@ -553,8 +573,11 @@ class C2FPolicy(nn.Module):
 def load_model(
     path: str, method: str, env_id: str, obs_dim: int, act_dim: int, control: bool = False
 ):
-    """Rebuild the policy a method script saved with --save-model; returns (policy, its training args).
-    method "c2f": a model of c2f.py or c2f_table3.py, its args completed with c2f_table3.py's defaults.
+    """Rebuild the policy a method script saved with --save-model; returns (policy, its
+    training args).
+
+    method "c2f": a model of c2f.py or c2f_table3.py, its args completed with c2f_table3.py's
+        defaults.
     control: the model of --control, a c2f_table3.py model trained with --no-coarse-action."""
     flag = "--" + method.replace("_", "-")
     script = f"{method}.py"
@@ -586,11 +609,13 @@ def load_model(
         raise UsageError(f"{problem}: pass a seed<S>.pt written by {script}")
     if saved_method not in accepted:
         raise UsageError(
-            f"{flag} {path} is a {saved_method} model, not {method}: pass the model written by {script}"
+            f"{flag} {path} is a {saved_method} model, not {method}: "
+            f"pass the model written by {script}"
         )
     if saved_env != env_id:
         raise UsageError(
-            f"{flag} {path} is a model of {saved_env}, not {env_id}: pass a model trained on {env_id}, or --env {saved_env}"
+            f"{flag} {path} is a model of {saved_env}, not {env_id}: "
+            f"pass a model trained on {env_id}, or --env {saved_env}"
         )
     if method == "c2f":
         # c2f.py's models record no Table 3 flag: they are c2f_table3.py's at its defaults.
@@ -624,13 +649,15 @@ def load_model(
         policy.load_state_dict(checkpoint["state_dict"])
     except RuntimeError:
         raise UsageError(
-            f"{flag} {path}: its weights do not fit a {method} policy with history {history} on {env_id}'s {obs_dim}-d observations: re-save it with {script}"
+            f"{flag} {path}: its weights do not fit a {method} policy with history {history} "
+            f"on {env_id}'s {obs_dim}-d observations: re-save it with {script}"
         )
     return policy.eval(), saved
 
 
 def agreed(saved: dict, key: str, flag: str, readers=None, fix="pass models trained alike"):
-    """The training value of `key` shared by the models in `readers` (default: all), or a clear error when they differ."""
+    """The training value of `key` shared by the models in `readers` (default: all), or a clear
+    error when they differ."""
     readers = tuple(saved) if readers is None else readers
     values = {method: saved[method].get(key) for method in readers}
     if len(set(map(str, values.values()))) > 1:
@@ -649,7 +676,8 @@ def as_actor(policy: nn.Module, low: np.ndarray, high: np.ndarray):
 
 
 def zeta_intervention(policy: C2FPolicy, low: np.ndarray, high: np.ndarray):
-    """numpy (coarse, final): zeta = pi_phi(o_t), and pi_theta(o_hist, do(zeta)) clipped to the action bounds."""
+    """numpy (coarse, final): zeta = pi_phi(o_t), and pi_theta(o_hist, do(zeta)) clipped to the
+    action bounds."""
 
     @torch.no_grad()
     def coarse(histories: np.ndarray) -> np.ndarray:
@@ -658,14 +686,14 @@ def zeta_intervention(policy: C2FPolicy, low: np.ndarray, high: np.ndarray):
     @torch.no_grad()
     def final(histories: np.ndarray, zeta: np.ndarray) -> np.ndarray:
         obs_history = torch.as_tensor(histories, dtype=torch.float32)
-        fixed, feature = (
-            torch.as_tensor(zeta, dtype=torch.float32),
-            policy.coarse_model(obs_history)[1],
-        )
-        policy.coarse_model = lambda _: (
-            fixed,
-            feature,
-        )  # shadows the method for one call: the rest of the forward is the trained one
+        fixed = torch.as_tensor(zeta, dtype=torch.float32)
+        feature = policy.coarse_model(obs_history)[1]
+
+        def fixed_coarse_model(_):
+            return fixed, feature
+
+        # This shadows the method for one call: the rest of the forward is the trained one.
+        policy.coarse_model = fixed_coarse_model
         try:
             return policy.coarse_and_final(obs_history)[1].numpy().clip(low, high)
         finally:
@@ -684,16 +712,19 @@ def distance(a: np.ndarray, b: np.ndarray, scale: np.ndarray) -> np.ndarray:
 
 
 def repeat_current(histories: np.ndarray, obs_dim: int) -> np.ndarray:
-    """do(o_hist) = [o_t, ..., o_t]: every frame of each history replaced by its current (last) frame."""
+    """do(o_hist) = [o_t, ..., o_t]: every frame of each history replaced by its current (last)
+    frame."""
     return np.tile(histories[:, -obs_dim:], histories.shape[1] // obs_dim)
 
 
 def history_intervention(
     act, histories: np.ndarray, obs_dim: int, prev_actions: np.ndarray, scale: np.ndarray
 ):
-    """Per step: how far the action moves under do(o_hist) (mean over dims of |change| / scale), and whether
-    the real history pulls it towards a_{t-1} (pi(o_hist) strictly closer to a_{t-1} than pi(do(o_hist)))."""
-    factual, counterfactual = act(histories), act(repeat_current(histories, obs_dim))
+    """Per step: how far the action moves under do(o_hist) (mean over dims of |change| / scale),
+    and whether the real history pulls it towards a_{t-1} (pi(o_hist) strictly closer to a_{t-1}
+    than pi(do(o_hist)))."""
+    factual = act(histories)
+    counterfactual = act(repeat_current(histories, obs_dim))
     change = (np.abs(factual - counterfactual) / scale).mean(1)
     towards = distance(factual, prev_actions, scale) < distance(counterfactual, prev_actions, scale)
     return change, towards
@@ -702,7 +733,8 @@ def history_intervention(
 def changepoints(
     actions: np.ndarray, episode_starts: np.ndarray, scale: np.ndarray, quantile: float
 ) -> np.ndarray:
-    """Steps t with a predecessor in their episode whose |a_t - a_{t-1}| (scaled) is at or above its `quantile`."""
+    """Steps t with a predecessor in their episode whose |a_t - a_{t-1}| (scaled) is at or above
+    its `quantile`."""
     steps = np.flatnonzero(~episode_starts.astype(bool))
     steps = steps[steps > 0]
     jump = distance(actions[steps], actions[steps - 1], scale)
@@ -720,11 +752,14 @@ def copycat_score(
 def zeta_effect(
     final, histories: np.ndarray, zeta: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> np.ndarray:
-    """CE[t, d] = |final(h_t, zeta_t with zeta_d = lo_d)_d - final(h_t, zeta_t with zeta_d = hi_d)_d|."""
+    """CE[t, d] = |final(h_t, zeta_t with zeta_d = lo_d)_d
+    - final(h_t, zeta_t with zeta_d = hi_d)_d|."""
     effect = np.zeros_like(zeta, dtype=np.float64)
     for d in range(zeta.shape[1]):
-        low_zeta, high_zeta = zeta.copy(), zeta.copy()
-        low_zeta[:, d], high_zeta[:, d] = lo[d], hi[d]
+        low_zeta = zeta.copy()
+        low_zeta[:, d] = lo[d]
+        high_zeta = zeta.copy()
+        high_zeta[:, d] = hi[d]
         effect[:, d] = np.abs(final(histories, low_zeta)[:, d] - final(histories, high_zeta)[:, d])
     return effect
 
@@ -743,31 +778,32 @@ def rollout(
     history: int,
     seed: int,
 ) -> dict:
-    """One episode of the deterministic policy on the partially observed env: its histories, executed
-    actions, observations (the positions are noise-free) and return."""
+    """One episode of the deterministic policy on the partially observed env: its histories,
+    executed actions, observations (the positions are noise-free) and return."""
     env = PartialObservation(make_env(env_id, frame_skip), dims, std, hide, seed)
     obs, _ = env.reset(seed=seed)
-    frames = np.repeat(
-        obs[None], history, axis=0
-    )  # the last H frames, the first one repeated (stack_history's rule)
-    record, total, done = {"histories": [], "actions": [], "observations": []}, 0.0, False
+    # The last H frames, the first one repeated (stack_history's rule).
+    frames = np.repeat(obs[None], history, axis=0)
+    record = {"histories": [], "actions": [], "observations": []}
+    total = 0.0
+    done = False
     while not done:
         histories = frames.reshape(1, -1)
         action = act(histories)[0]
-        (
-            record["histories"].append(histories[0]),
-            record["actions"].append(action),
-            record["observations"].append(obs),
-        )
+        record["histories"].append(histories[0])
+        record["actions"].append(action)
+        record["observations"].append(obs)
         obs, reward, terminated, truncated, _ = env.step(action)
         frames = np.concatenate([frames[1:], obs[None]])
-        total, done = total + float(reward), terminated or truncated
+        total += float(reward)
+        done = terminated or truncated
     env.close()
     return {**{key: np.array(value) for key, value in record.items()}, "return": total}
 
 
 def with_previous(episodes: list):
-    """(histories, previous actions) of every step but each episode's first, over a list of rollouts."""
+    """(histories, previous actions) of every step but each episode's first, over a list of
+    rollouts."""
     histories = np.concatenate([episode["histories"][1:] for episode in episodes])
     return histories, np.concatenate([episode["actions"][:-1] for episode in episodes])
 
@@ -795,7 +831,8 @@ def plot_zeta_effect(
     episode_return: float,
     late_fusion: bool,
 ):
-    """CE_d / (hi_d - lo_d) along one trajectory (1: the action follows zeta fully, 0: ignores it), the state beneath."""
+    """CE_d / (hi_d - lo_d) along one trajectory (1: the action follows zeta fully, 0: ignores
+    it), the state beneath."""
     family = env_id.split("-")[0]
     names = ACTION_NAMES.get(family, [f"a[{d}]" for d in range(effect.shape[1])])
     fig, (top, bottom) = plt.subplots(
@@ -808,18 +845,19 @@ def plot_zeta_effect(
             label=f"{names[d]}: do(zeta) = {lo[d]:.2f} vs {hi[d]:.2f}",
         )
     top.set_ylabel("CE / (hi - lo)")
-    if (
-        late_fusion
-    ):  # late or output fusion: one linear layer after the join, so the effect is a weight of it
+    # Late or output fusion: one linear layer after the join, so the effect is a weight of it.
+    if late_fusion:
         fig.text(
             0.01,
             0.01,
-            "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = |its weight on zeta_d| wherever the "
-            "action is not clipped at its bounds (dips: clipped)",
+            "late fusion: the final layer is linear in zeta, so CE / (hi - lo) = "
+            "|its weight on zeta_d| wherever the action is not clipped at its bounds "
+            "(dips: clipped)",
             fontsize=8,
         )
     top.set_title(
-        f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): causal effect of the coarse action zeta"
+        f"{env_id}, C2F on its own noisy rollout (return {episode_return:.0f}): "
+        "causal effect of the coarse action zeta"
     )
     top.legend(loc="upper right", fontsize=8)
     top.grid(alpha=0.3)
@@ -836,7 +874,8 @@ def plot_zeta_effect(
 
 
 def plot_history_intervention(path: str, env_id: str, changes: dict):
-    """Per source (held-out demos, own rollouts), the distribution of each method's per-step |change| under do(o_hist)."""
+    """Per source (held-out demos, own rollouts), the distribution of each method's per-step
+    |change| under do(o_hist)."""
     fig, axes = plt.subplots(1, len(changes), figsize=(6 * len(changes), 4))
     for ax, (source, per_method) in zip(np.atleast_1d(axes), changes.items()):
         top = max(float(np.quantile(np.concatenate(list(per_method.values())), 0.99)), 1e-3)
@@ -853,7 +892,8 @@ def plot_history_intervention(path: str, env_id: str, changes: dict):
             )
         ax.set_yscale("log")
         ax.set_xlabel(
-            "mean |pi(o_hist) - pi(do(o_hist) = [o_t, ..., o_t])| / demo action std\n(above the 99th percentile: last bin)"
+            "mean |pi(o_hist) - pi(do(o_hist) = [o_t, ..., o_t])| / demo action std\n"
+            "(above the 99th percentile: last bin)"
         )
         ax.set_ylabel("fraction of steps")
         ax.set_title(f"{env_id}: intervention on the history, {source}")
@@ -885,17 +925,22 @@ def check_args(args):
         )
     if args.demos is None and args.seed == 0:
         raise UsageError(
-            "--seed 0 would regenerate the training demonstrations: use another seed for held-out demos"
+            "--seed 0 would regenerate the training demonstrations: "
+            "use another seed for held-out demos"
         )
 
 
 def run(args):
-    """Load the three models (four with --control), intervene on held-out demos and on their own rollouts, report and draw."""
+    """Load the three models (four with --control), intervene on held-out demos and on their own
+    rollouts, report and draw."""
     check_args(args)
     env = make_env(args.env)
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    low, high = env.action_space.low, env.action_space.high
-    models, saved = {}, {}
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
+    low = env.action_space.low
+    high = env.action_space.high
+    models = {}
+    saved = {}
     paths = {method: getattr(args, method).format(env=args.env) for method in METHODS}
     for method in METHODS:
         models[method], saved[method] = load_model(
@@ -912,47 +957,46 @@ def run(args):
         recorded = training.get("velocity_dims")
         if recorded and sorted(set(recorded)) != dims:
             raise UsageError(
-                f"{paths[method]} was trained with the noise on observation entries {sorted(set(recorded))}, "
-                f"not on {args.env}'s velocities {dims}: retrain it"
+                f"{paths[method]} was trained with the noise on observation entries "
+                f"{sorted(set(recorded))}, not on {args.env}'s velocities {dims}: retrain it"
             )
     # Models made before the method files recorded their rate hold None: the env's own.
     native = getattr(env.unwrapped, "frame_skip", None)
     rates = {}
     for method, training in saved.items():
         rates[method] = {"frame_skip": training.get("frame_skip") or native}
+    # BC-SO reads o_t only: any history fits it.
     model_history = agreed(
         saved,
         "history",
         "--history",
         tuple(m for m in saved if m != "bc_so"),
         "pass models trained with one history length",
-    )  # BC-SO reads o_t only: any history fits it
+    )
     history = args.history or model_history
     if history != model_history:
         raise UsageError(
-            f"--history {history} does not match the models, trained with history {model_history}: drop --history or pass {model_history}"
+            f"--history {history} does not match the models, trained with history "
+            f"{model_history}: drop --history or pass {model_history}"
         )
-    std = (
-        agreed(
-            saved, "obs_noise_std", "--obs-noise-std", fix="pass --obs-noise-std for the analysis"
-        )
-        if args.obs_noise_std is None
-        else args.obs_noise_std
-    )
+    std = args.obs_noise_std
+    if args.obs_noise_std is None:
+        fix = "pass --obs-noise-std for the analysis"
+        std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix=fix)
     frame_skip = agreed(rates, "frame_skip", "--frame-skip")
     hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
 
     demos = heldout_demos(args, env, frame_skip)
-    actions, starts = demos["actions"].astype(np.float64), demos["episode_starts"]
-    scale = actions.std(0).clip(1e-6)  # the expert's action scale, per dim
-    lo, hi = (
-        np.quantile(actions, args.zeta_quantile, axis=0),
-        np.quantile(actions, 1 - args.zeta_quantile, axis=0),
-    )
-    histories = stack_history(
-        partially_observe(demos["observations"], dims, std, hide, args.seed), starts, history
-    )
-    steps = np.flatnonzero(~starts)  # steps with a previous action in their episode
+    actions = demos["actions"].astype(np.float64)
+    starts = demos["episode_starts"]
+    # The expert's action scale, per dim.
+    scale = actions.std(0).clip(1e-6)
+    lo = np.quantile(actions, args.zeta_quantile, axis=0)
+    hi = np.quantile(actions, 1 - args.zeta_quantile, axis=0)
+    observed = partially_observe(demos["observations"], dims, std, hide, args.seed)
+    histories = stack_history(observed, starts, history)
+    # The steps with a previous action in their episode.
+    steps = np.flatnonzero(~starts)
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
     actors = {method: as_actor(model, low, high) for method, model in models.items()}
@@ -965,7 +1009,8 @@ def run(args):
         ]
         for method in models
     }
-    changes, report = {"held-out demos": {}, "own rollouts": {}}, {}
+    changes = {"held-out demos": {}, "own rollouts": {}}
+    report = {}
     for method in models:
         change, towards = history_intervention(
             actors[method], histories[steps], obs_dim, actions[steps - 1], scale
@@ -974,7 +1019,8 @@ def run(args):
         roll_change, roll_towards = history_intervention(
             actors[method], roll_histories, obs_dim, roll_prev, scale
         )
-        changes["held-out demos"][method], changes["own rollouts"][method] = change, roll_change
+        changes["held-out demos"][method] = change
+        changes["own rollouts"][method] = roll_change
         report[method] = {
             "model": paths[method],
             "rollout_returns": [episode["return"] for episode in rollouts[method]],
@@ -1028,33 +1074,66 @@ def run(args):
         lambda file: file.write(json.dumps(summary, indent=1).encode()),
     )
 
+    noise = f"noise std {std}"
+    if hide:
+        noise = "velocities hidden"
     print(
-        f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), {args.eval_episodes} rollouts per policy, {'velocities hidden' if hide else f'noise std {std}'}, history {history}, frame skip {frame_skip or 'native'}"
+        f"\n{args.env}: {len(actions)} held-out demo steps ({len(points)} changepoints), "
+        f"{args.eval_episodes} rollouts per policy, {noise}, history {history}, "
+        f"frame skip {frame_skip or 'native'}"
     )
     print(
-        "do(o_hist): mean |change| / action std, and the fraction of steps the history pulls towards a_{t-1}"
+        "do(o_hist): mean |change| / action std, "
+        "and the fraction of steps the history pulls towards a_{t-1}"
     )
-    print(
-        f"{'method':>13} | {'return':>7} | {'change demos':>12} | {'towards':>7} | {'change rollouts':>15} | {'towards':>7} | {'copycat score':>13}"
-    )
+    header = [
+        f"{'method':>13}",
+        f"{'return':>7}",
+        f"{'change demos':>12}",
+        f"{'towards':>7}",
+        f"{'change rollouts':>15}",
+        f"{'towards':>7}",
+        f"{'copycat score':>13}",
+    ]
+    print(" | ".join(header))
     for method, row in report.items():
-        print(
-            f"{method:>13} | {np.mean(row['rollout_returns']):7.1f} | {row['history_change_demos']:12.3f} | {row['towards_previous_demos']:7.2f} | "
-            f"{row['history_change_rollouts']:15.3f} | {row['towards_previous_rollouts']:7.2f} | {row['copycat_score']:13.2f}"
-        )
+        cells = [
+            f"{method:>13}",
+            f"{np.mean(row['rollout_returns']):7.1f}",
+            f"{row['history_change_demos']:12.3f}",
+            f"{row['towards_previous_demos']:7.2f}",
+            f"{row['history_change_rollouts']:15.3f}",
+            f"{row['towards_previous_rollouts']:7.2f}",
+            f"{row['copycat_score']:13.2f}",
+        ]
+        print(" | ".join(cells))
     print(
         "do(zeta), c2f: CE = |pi(do(zeta_d) = lo_d) - pi(do(zeta_d) = hi_d)|_d, and CE / (hi - lo)"
     )
-    print(
-        f"{'dim':>3} | {'lo':>6} | {'hi':>6} | {'CE demos':>8} | {'rel':>5} | {'CE rollouts':>11} | {'rel':>5}"
-    )
+    header = [
+        f"{'dim':>3}",
+        f"{'lo':>6}",
+        f"{'hi':>6}",
+        f"{'CE demos':>8}",
+        f"{'rel':>5}",
+        f"{'CE rollouts':>11}",
+        f"{'rel':>5}",
+    ]
+    print(" | ".join(header))
     for d in range(act_dim):
-        print(
-            f"{d:>3} | {lo[d]:6.2f} | {hi[d]:6.2f} | {zeta['effect_demos'][d]:8.3f} | {zeta['relative_demos'][d]:5.2f} | "
-            f"{zeta['effect_rollouts'][d]:11.3f} | {zeta['relative_rollouts'][d]:5.2f}"
-        )
+        cells = [
+            f"{d:>3}",
+            f"{lo[d]:6.2f}",
+            f"{hi[d]:6.2f}",
+            f"{zeta['effect_demos'][d]:8.3f}",
+            f"{zeta['relative_demos'][d]:5.2f}",
+            f"{zeta['effect_rollouts'][d]:11.3f}",
+            f"{zeta['relative_rollouts'][d]:5.2f}",
+        ]
+        print(" | ".join(cells))
     print(
-        f"pictures and report: {out_dir}/ (zeta_effect.png, history_intervention.png, copycat_analysis.json)"
+        f"pictures and report: {out_dir}/ "
+        "(zeta_effect.png, history_intervention.png, copycat_analysis.json)"
     )
 
 
