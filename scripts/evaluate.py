@@ -3,14 +3,16 @@
     python scripts/evaluate.py runs/c2f/Hopper-v4/seed1.pt
     python scripts/evaluate.py runs/c2f/Hopper-v4/seed1.pt --episodes 20 --seed 100
 
-The checkpoint names its method: this script imports that method file from the repository root, rebuilds
-its policy with the file's own make_policy (on zero inputs of the saved shape: load_state_dict then
-restores the weights and the normaliser's statistics) and runs the file's own evaluate on the env,
-control rate and partial observability recorded in the checkpoint; it prints every return and the
-summary line. A run's evaluation after epoch E of training seed S used --seed 10000 * S + E with
---episodes = its --eval-episodes (DAgger's final learner: three evaluations, + 0, N and 2N episodes on,
-N = --eval-episodes): that seed reproduces it exactly (on a CPU). scripts/watch.py renders saved policies to a GIF.
+The checkpoint names its method: this script imports that method file from the repository root,
+rebuilds its policy with the file's own make_policy (on zero inputs of the saved shape:
+load_state_dict then restores the weights and the normaliser's statistics) and runs the file's own
+evaluate on the env, control rate and partial observability recorded in the checkpoint; it prints
+every return and the summary line. A run's evaluation after epoch E of training seed S used
+--seed 10000 * S + E with --episodes = its --eval-episodes (DAgger's final learner: three
+evaluations, + 0, N and 2N episodes on, N = --eval-episodes): that seed reproduces it exactly
+(on a CPU). scripts/watch.py renders saved policies to a GIF.
 """
+
 import importlib
 import re
 import sys
@@ -20,94 +22,148 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # tooling may import the repository's benchmark package and method files
-from benchmark.results import OneLineParser, UsageError, run_cli  # noqa: E402
+# Tooling may import the repository's benchmark package and method files.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark.results import OneLineParser, UsageError, run_cli
 
+ROOT = Path(__file__).resolve().parent.parent
 CHECKPOINT_KEYS = ("method", "env_id", "args", "obs_dim", "act_dim", "state_dict")
 """what every method file's --save-model writes"""
 SAVE_FIX = "pass a seed<S>.pt that a method file wrote with --save-model"
 RETIRED = ("expert", "cuda_graph", "velocity_dims")
-"""settings the method files dropped that change neither the policy nor its evaluation (--expert: which expert made the
-demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on the GPU; --velocity-dims: None, the built-in
-layout, unless set, which saved_args refuses): an older checkpoint's are ignored"""
+"""settings the method files dropped that change neither the policy nor its evaluation (--expert:
+which expert made the demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on
+the GPU; --velocity-dims: None, the built-in layout, unless set, which saved_args refuses): an
+older checkpoint's are ignored"""
+METHOD_FILE_NAMES = ("METHOD", "Args", "make_policy", "evaluate", "make_env", "UsageError")
+"""what a method file defines that this script uses"""
 
 
 def read_checkpoint(path) -> dict:
-    """The checkpoint at `path`, checked to be one --save-model writes (torch only: imports no method file)."""
+    """The checkpoint at `path`, checked to be one --save-model writes (torch only: imports no
+    method file)."""
     path = Path(path)
     if not path.is_file():
-        raise UsageError(f"checkpoint {path} not found: {SAVE_FIX}, e.g. runs/bc_oh/Hopper-v4/seed1.pt")
+        raise UsageError(
+            f"checkpoint {path} not found: {SAVE_FIX}, e.g. runs/bc_oh/Hopper-v4/seed1.pt"
+        )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:
-        raise UsageError(f"{path} is not a readable checkpoint ({type(error).__name__}): the file is damaged or no torch file; "
-                         f"re-save it with --save-model, or {SAVE_FIX}")
-    missing = [key for key in CHECKPOINT_KEYS if key not in checkpoint] if isinstance(checkpoint, dict) else ["method"]
+        raise UsageError(
+            f"{path} is not a readable checkpoint ({type(error).__name__}): "
+            "the file is damaged or no torch file; "
+            f"re-save it with --save-model, or {SAVE_FIX}"
+        )
+    if isinstance(checkpoint, dict):
+        missing = [key for key in CHECKPOINT_KEYS if key not in checkpoint]
+    else:
+        missing = ["method"]
     if missing:
-        hint = " (an expert: expert_ppo.py --help shows how to evaluate it)" if isinstance(checkpoint, dict) and "actor" in checkpoint else ""
-        raise UsageError(f"{path} is not a model saved with --save-model: it has no {missing[0]!r}{hint}; {SAVE_FIX}")
-    if not isinstance(checkpoint["method"], str) or not re.fullmatch(r"[a-z][a-z0-9_]*", checkpoint["method"]):
-        raise UsageError(f"{path} names the method {checkpoint['method']!r}, not a method file's name: {SAVE_FIX}")
+        hint = ""
+        if isinstance(checkpoint, dict) and "actor" in checkpoint:
+            hint = " (an expert: expert_ppo.py --help shows how to evaluate it)"
+        raise UsageError(
+            f"{path} is not a model saved with --save-model: "
+            f"it has no {missing[0]!r}{hint}; {SAVE_FIX}"
+        )
+    method = checkpoint["method"]
+    if not isinstance(method, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", method):
+        raise UsageError(
+            f"{path} names the method {method!r}, not a method file's name: {SAVE_FIX}"
+        )
     if not isinstance(checkpoint["args"], dict) or not isinstance(checkpoint["state_dict"], dict):
-        raise UsageError(f"{path} holds no args and weights as --save-model writes them: {SAVE_FIX}")
+        raise UsageError(
+            f"{path} holds no args and weights as --save-model writes them: {SAVE_FIX}"
+        )
     return checkpoint
 
 
 def method_module(method: str, path):
     """The method file ROOT/<method>.py, imported (the method files are self-contained modules)."""
     if not (ROOT / f"{method}.py").is_file():
-        raise UsageError(f"{path} was saved by {method}.py, which is not in {ROOT}: "
-                         f"evaluate it in a checkout that has {method}.py, or {SAVE_FIX}")
+        raise UsageError(
+            f"{path} was saved by {method}.py, which is not in {ROOT}: "
+            f"evaluate it in a checkout that has {method}.py, or {SAVE_FIX}"
+        )
     module = importlib.import_module(method)
-    if not all(hasattr(module, name) for name in ("METHOD", "Args", "make_policy", "evaluate", "make_env", "UsageError")):
-        raise UsageError(f"{method}.py (named by {path}) is not a method file with Args, make_policy and evaluate: {SAVE_FIX}")
+    if not all(hasattr(module, name) for name in METHOD_FILE_NAMES):
+        raise UsageError(
+            f"{method}.py (named by {path}) is not a method file "
+            f"with Args, make_policy and evaluate: {SAVE_FIX}"
+        )
     return module
 
 
 def saved_args(module, checkpoint: dict, path):
-    """The method file's Args with the checkpoint's values (settings the file added since keep their defaults, RETIRED
-    ones it no longer has are dropped)."""
+    """The method file's Args with the checkpoint's values (settings the file added since keep
+    their defaults, RETIRED ones it no longer has are dropped)."""
     if checkpoint["args"].get("velocity_dims"):
-        raise UsageError(f"{path} was trained with --velocity-dims, which the method files no longer have: "
-                         "evaluate it with the version of its method file that saved it")
+        raise UsageError(
+            f"{path} was trained with --velocity-dims, which the method files no longer have: "
+            "evaluate it with the version of its method file that saved it"
+        )
     known = {field.name for field in fields(module.Args)}
     unknown = sorted(set(checkpoint["args"]) - known - set(RETIRED))
+    method = checkpoint["method"]
     if unknown:
-        raise UsageError(f"{path} records the setting {unknown[0]!r}, which this {checkpoint['method']}.py does not have: "
-                         f"it was saved by another version of {checkpoint['method']}.py; evaluate it with that version")
-    return module.Args(**{name: value for name, value in checkpoint["args"].items() if name in known})
+        raise UsageError(
+            f"{path} records the setting {unknown[0]!r}, "
+            f"which this {method}.py does not have: "
+            f"it was saved by another version of {method}.py; evaluate it with that version"
+        )
+    values = {name: value for name, value in checkpoint["args"].items() if name in known}
+    return module.Args(**values)
 
 
 def load_policy(path):
-    """(method module, policy in eval mode on the CPU, its Args) for a checkpoint written by --save-model."""
+    """(method module, policy in eval mode on the CPU, its Args) for a checkpoint written by
+    --save-model."""
     checkpoint = read_checkpoint(path)
-    module = method_module(checkpoint["method"], path)
+    method = checkpoint["method"]
+    module = method_module(method, path)
     try:
         args = saved_args(module, checkpoint, path)
-        env = module.make_env(args.env, args.frame_skip)  # the checkpoint's env at its control rate, or one clear line
+        # Make the checkpoint's env at its control rate, or fail with one clear line.
+        env = module.make_env(args.env, args.frame_skip)
     except module.UsageError as error:
         raise UsageError(f"{path}: {error}")
-    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    obs_dim = env.observation_space.shape[0]
+    act_dim = env.action_space.shape[0]
     env.close()
     if (checkpoint["obs_dim"], checkpoint["act_dim"]) != (obs_dim, act_dim):
-        raise UsageError(f"{path} was trained on observations of width {checkpoint['obs_dim']} and actions of width {checkpoint['act_dim']}, "
-                         f"but {args.env} here has {obs_dim} and {act_dim}: use the gymnasium version it was trained with")
-    inputs = torch.zeros(2, obs_dim * args.history)  # only the shape matters: the normaliser's statistics come from the state_dict
+        raise UsageError(
+            f"{path} was trained on observations of width {checkpoint['obs_dim']} "
+            f"and actions of width {checkpoint['act_dim']}, "
+            f"but {args.env} here has {obs_dim} and {act_dim}: "
+            "use the gymnasium version it was trained with"
+        )
+    # Only the shape matters: the normaliser's statistics come from the state_dict.
+    inputs = torch.zeros(2, obs_dim * args.history)
     policy = module.make_policy(args, obs_dim, act_dim, inputs)
     try:
         policy.load_state_dict(checkpoint["state_dict"])
     except (RuntimeError, TypeError) as error:
-        first = str(error).splitlines()[1].strip() if len(str(error).splitlines()) > 1 else type(error).__name__
-        raise UsageError(f"{path}: its weights do not fit the {checkpoint['method']} policy its args describe ({first}): "
-                         f"re-save it with this {checkpoint['method']}.py")
-    torch.set_num_threads(1)  # as the method files train and evaluate: the same digits
+        lines = str(error).splitlines()
+        if len(lines) > 1:
+            first = lines[1].strip()
+        else:
+            first = type(error).__name__
+        raise UsageError(
+            f"{path}: its weights do not fit the {method} policy its args describe ({first}): "
+            f"re-save it with this {method}.py"
+        )
+    # Use one thread, as the method files train and evaluate: the same digits.
+    torch.set_num_threads(1)
     return module, policy.eval(), args
 
 
 def describe(args) -> str:
     """The partial observability and control rate a policy acts under, in words."""
-    sensor = "velocities hidden" if args.hide_velocities else f"velocity noise std {args.obs_noise_std}"
+    if args.hide_velocities:
+        sensor = "velocities hidden"
+    else:
+        sensor = f"velocity noise std {args.obs_noise_std}"
     return f"{args.env}, {sensor}, frame skip {args.frame_skip}, history {args.history}"
 
 
@@ -121,16 +177,34 @@ def positive(text: str) -> int:
 def main(argv=None):
     parser = OneLineParser(prog="python scripts/evaluate.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", help="a seed<S>.pt written by a method file's --save-model")
-    parser.add_argument("--episodes", type=positive, help="episodes, run in parallel (default: the run's --eval-episodes)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (episode i: seed + i, its env and its sensor noise)")
+    parser.add_argument(
+        "--episodes",
+        type=positive,
+        help="episodes, run in parallel (default: the run's --eval-episodes)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the first episode (episode i: seed + i, its env and its sensor noise)",
+    )
     options = parser.parse_args(argv)
     module, policy, args = load_policy(options.checkpoint)
     episodes = options.episodes or args.eval_episodes
-    print(f"{module.METHOD} from {options.checkpoint} on {describe(args)}: {episodes} episode{'s' * (episodes > 1)} from --seed {options.seed}")
+    noun = "episode"
+    if episodes > 1:
+        noun = "episodes"
+    print(
+        f"{module.METHOD} from {options.checkpoint} on {describe(args)}: "
+        f"{episodes} {noun} from --seed {options.seed}"
+    )
     returns = module.evaluate(policy, args, episodes, options.seed, torch.device("cpu"))
     for i, value in enumerate(returns):
-        print(f"episode {i + 1} | seed {options.seed + i} | return {value!r}")  # repr: every digit, to compare with a run's JSON
-    print(f"{args.env} {module.METHOD}: {np.mean(returns):.1f} ± {np.std(returns):.1f} over {episodes} episode{'s' * (episodes > 1)}")
+        # The repr prints every digit, to compare with a run's JSON.
+        print(f"episode {i + 1} | seed {options.seed + i} | return {value!r}")
+    mean = np.mean(returns)
+    std = np.std(returns)
+    print(f"{args.env} {module.METHOD}: {mean:.1f} ± {std:.1f} over {episodes} {noun}")
     return 0
 
 
