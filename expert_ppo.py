@@ -167,7 +167,6 @@ def train(args: Args):
     output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
     latest_path = os.path.join(output_dir, "latest.pt")
     best_path = os.path.join(output_dir, "best.pt")
-    np.random.seed(args.seed)
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
 

@@ -57,7 +57,7 @@ CEILINGS = {
     "average_ensemble": 597,
     "dagger": 673,
     "c2f_table3": 643,
-    "expert_ppo": 699,
+    "expert_ppo": 698,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
 gives the history of each value): a file may shrink towards its target (file_sizes.TARGETS;
