@@ -9,6 +9,7 @@ pytest.ini puts the repo root and scripts/ on sys.path, so tests can also `impor
 `import bc_oh` or `import check_copies` directly.
 """
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -162,6 +163,7 @@ def run_in_process(script, *args):
 
     stdout, stderr, argv, code = io.StringIO(), io.StringIO(), sys.argv, 0
     sys.argv = [str(REPO_ROOT / script), *map(str, args)]
+    sigterm = signal.getsignal(signal.SIGTERM)  # the method files' __main__ turns SIGTERM into Ctrl-C
     try:
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
             runpy.run_path(str(REPO_ROOT / script), run_name="__main__")
@@ -169,4 +171,5 @@ def run_in_process(script, *args):
         code = exit.code if isinstance(exit.code, int) else 1
     finally:
         sys.argv = argv
+        signal.signal(signal.SIGTERM, sigterm)
     return SimpleNamespace(returncode=code, stdout=stdout.getvalue(), stderr=stderr.getvalue())
