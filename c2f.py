@@ -1,10 +1,11 @@
 # Coarse-to-fine imitation, C2F (paper sections 4 and 8.3, Eq. 2, Table 2); see README.md
-"""C2F: a coarse MLP pi_phi on o_t gives a coarse action zeta; an MLP pi_theta encodes the history
-[o_{t-H+1}, ..., o_t]; one more layer maps that feature and sg(zeta) (a stop-gradient) to a_t.
+"""C2F: a coarse MLP pi_phi on o_t gives a coarse action zeta; the policy pi_theta maps the history
+[o_{t-H+1}, ..., o_t] and sg(zeta) (a stop-gradient) to a_t: an MLP encodes the history, and one
+more layer maps that feature and sg(zeta) to a_t.
 
 Copying zeta, a guess of a_t from o_t alone, is a simpler shortcut than recovering a_{t-1} from the
-history to copy it (the copycat shortcut, section 4): the policy learns to refine zeta. Table 3's
-ablations, on MuJoCo: c2f_table3.py. Code marked `# Copied from bc_oh.a..b` is bc_oh.py's.
+history to copy it (the copycat shortcut, sections 3.2 and 4.3): the policy learns to refine zeta.
+Table 3's ablations, on MuJoCo: c2f_table3.py. Code marked `# Copied from bc_oh.a..b` is bc_oh.py's.
 
     python c2f.py --env Hopper-v4
 """
@@ -28,7 +29,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f"
-LOSS = "Eq. 2, MSE(coarse action zeta, a_t) + MSE(final action, a_t)"
+LOSS = "MSE(coarse action zeta, a_t) + MSE(final action, a_t), Eq. 2's two losses summed"
 
 
 @dataclass
@@ -104,8 +105,9 @@ class Policy(nn.Module):
         self.obs_dim = obs_dim
         # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(obs_dim, act_dim, hidden)
-        # pi_theta: section 8.3's three-layer MLP on the history, whose last layer outputs a feature
-        # (not an action); in two parts, as c2f_table3.py's, whose --fusion middle joins zeta there.
+        # pi_theta's encoder, section 8.3's three-layer MLP on the history: it outputs a feature
+        # (section 4.2), not an action, so pi_theta is one layer deeper than bc_oh.py's network.
+        # It is split after its first layer as in c2f_table3.py, where --fusion middle joins zeta.
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
@@ -142,7 +144,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
-    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
+    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms/step)."""
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
@@ -158,7 +160,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
-        # Eq. 2's two MSE losses (section 8.3), summed: zeta is detached, so each trains its model.
+        # Eq. 2's two MSE losses (section 8.3), summed. zeta is detached, so each loss trains one
+        # model: zeta's trains pi_phi, and the final action's trains pi_theta (encoder and head).
         zeta, final = policy.coarse_and_final(inputs[idx])
         actions = targets[idx]
         final_loss = F.mse_loss(final, actions)
@@ -214,7 +217,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # ---- Evaluation ----
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """The deterministic policy's returns, one episode an env; env i (start, noise) has seed + i."""
+    """The deterministic policy's returns, one episode per env; env i (start, noise): seed + i."""
     env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
@@ -253,7 +256,7 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
         # gymnasium raises several error types for unknown or broken ids.
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation needs continuous ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
@@ -276,7 +279,8 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
-        raise UsageError(f"the velocity entries of {env_id} are unknown: use a MuJoCo v4 or v5 env")
+        known_envs = "Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use {known_envs}")
     start, end = known[family]
     return list(range(start, end))
 
@@ -307,7 +311,7 @@ def make_sensor_env(args, seed: int) -> gym.Env:
 
 
 def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The sensor's noise on the demos: the same law, drawn once from seed, fixed for all epochs."""
+    """PartialObservation's noise on the demos, drawn once from seed and fixed for all epochs."""
     observed = observations.copy()
     rng = np.random.default_rng(seed)
     if hide:
@@ -323,7 +327,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# At import, so that spawned workers get it too: the v4 envs' deprecation warnings stay quiet.
+# At import, so that spawned workers get it too: gymnasium's warnings (v4's deprecation) stay quiet.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -384,7 +388,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         needs = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
         raise UsageError(f"{path} holds {shapes}, but {needs}: use demos of this env")
     if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
-        raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
+        raise UsageError(f"{path}: the arrays need one row per step each, episode_starts 1-D")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
         steps = len(obs)

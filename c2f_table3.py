@@ -223,7 +223,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def train_seed(args, demos: dict, seed: int, device) -> tuple:
-    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms a step)."""
+    """Train on the demos; return (evaluations [(epoch, mean return)], the policy, ms/step)."""
     torch.manual_seed(seed)
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
@@ -313,7 +313,7 @@ def fit(
 # Copied from bc_oh.evaluate..run
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """The deterministic policy's returns, one episode an env; env i (start, noise) has seed + i."""
+    """The deterministic policy's returns, one episode per env; env i (start, noise): seed + i."""
     env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
@@ -352,7 +352,7 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
         # gymnasium raises several error types for unknown or broken ids.
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation needs continuous ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
@@ -375,7 +375,8 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
-        raise UsageError(f"the velocity entries of {env_id} are unknown: use a MuJoCo v4 or v5 env")
+        known_envs = "Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use {known_envs}")
     start, end = known[family]
     return list(range(start, end))
 
@@ -406,7 +407,7 @@ def make_sensor_env(args, seed: int) -> gym.Env:
 
 
 def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The sensor's noise on the demos: the same law, drawn once from seed, fixed for all epochs."""
+    """PartialObservation's noise on the demos, drawn once from seed and fixed for all epochs."""
     observed = observations.copy()
     rng = np.random.default_rng(seed)
     if hide:
@@ -422,7 +423,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# At import, so that spawned workers get it too: the v4 envs' deprecation warnings stay quiet.
+# At import, so that spawned workers get it too: gymnasium's warnings (v4's deprecation) stay quiet.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -483,7 +484,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         needs = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
         raise UsageError(f"{path} holds {shapes}, but {needs}: use demos of this env")
     if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
-        raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
+        raise UsageError(f"{path}: the arrays need one row per step each, episode_starts 1-D")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
         steps = len(obs)

@@ -142,7 +142,8 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
-        raise UsageError(f"the velocity entries of {env_id} are unknown: use a MuJoCo v4 or v5 env")
+        known_envs = "Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+        raise UsageError(f"the velocity entries of {env_id} are unknown: use {known_envs}")
     start, end = known[family]
     return list(range(start, end))
 
@@ -179,7 +180,7 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
         # gymnasium raises several error types for unknown or broken ids.
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation needs continuous ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env
@@ -340,7 +341,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         needs = f"{args.env} needs (N, {obs_dim}) and (N, {act_dim})"
         raise UsageError(f"{path} holds {shapes}, but {needs}: use demos of this env")
     if starts.ndim != 1 or not len(obs) == len(actions) == len(starts):
-        raise UsageError(f"{path}: its arrays have different numbers of rows: one row per step")
+        raise UsageError(f"{path}: the arrays need one row per step each, episode_starts 1-D")
     take = args.num_demo_samples or len(obs)
     if len(obs) < take:
         steps = len(obs)
@@ -417,7 +418,7 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
 
 # Copied from bc_oh.partially_observe
 def partially_observe(observations, dims: list, std: float, hide: bool, seed: int) -> np.ndarray:
-    """The sensor's noise on the demos: the same law, drawn once from seed, fixed for all epochs."""
+    """PartialObservation's noise on the demos, drawn once from seed and fixed for all epochs."""
     observed = observations.copy()
     rng = np.random.default_rng(seed)
     if hide:

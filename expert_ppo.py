@@ -529,7 +529,7 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
         # gymnasium raises several error types for unknown or broken ids.
         raise UsageError(f"cannot make env {env_id!r} ({error}): use a MuJoCo id such as Hopper-v4")
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise UsageError(f"env {env_id!r} has discrete actions: imitation here needs Box ones")
+        raise UsageError(f"env {env_id!r} has discrete actions: imitation needs continuous ones")
     native = getattr(env.unwrapped, "frame_skip", None)
     if frame_skip is None or frame_skip == native:
         return env

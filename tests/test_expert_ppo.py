@@ -119,7 +119,7 @@ def test_shipped_expert_scores_well():
     "args, message",
     [
         (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
-        (["--env", "CartPole-v1"], "has discrete actions: imitation here needs Box ones"),
+        (["--env", "CartPole-v1"], "has discrete actions: imitation needs continuous ones"),
         (["--eval-only", "--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
         (["--eval-only", "--checkpoint", "garbage.pt"], "garbage.pt is not a readable expert checkpoint"),
         (["--env", "Walker2d-v4", "--eval-only", "--checkpoint", "{tiny}"], "is an expert for Hopper-v4, not Walker2d-v4"),

@@ -123,14 +123,15 @@ def write_demos(path, observations, actions, starts):
 
 
 @pytest.mark.parametrize("case, message", [
-    ("rows", "demos.npz: its arrays have different numbers of rows: one row per step"),
+    ("rows", "demos.npz: the arrays need one row per step each, episode_starts 1-D"),
+    ("2-D starts", "demos.npz: the arrays need one row per step each, episode_starts 1-D"),
     ("transposed", "(11, 100) and actions (3, 100), but Hopper-v4 needs (N, 11) and (N, 3): use demos of this env"),
     ("other env", "(100, 17) and actions (100, 6), but Hopper-v4 needs (N, 11) and (N, 3): use demos of this env"),
 ])
 def test_a_demo_file_that_does_not_fit_is_told_what_is_wrong(tmp_path, case, message):
     rng, starts = np.random.default_rng(0), np.arange(100) % 50 == 0
     obs, actions = rng.normal(size=(100, 11)), rng.uniform(-1, 1, (100, 3))
-    arrays = {"rows": (obs, actions[:99], starts), "transposed": (obs.T, actions.T, starts),
+    arrays = {"rows": (obs, actions[:99], starts), "2-D starts": (obs, actions, starts[:, None]), "transposed": (obs.T, actions.T, starts),
               "other env": (rng.normal(size=(100, 17)), rng.uniform(-1, 1, (100, 6)), starts)}[case]
     path = write_demos(tmp_path / "demos.npz", *arrays)
     assert_usage_error(run_in_process("bc_oh.py", "--demos", path, "--epochs", 1), message)
@@ -149,7 +150,7 @@ def test_the_progress_lines_say_what_their_numbers_are(tmp_path, monkeypatch, ca
     header names the score."""
     import c2f
 
-    for module, loss in ((bc_oh, "MSE to the expert's actions"), (c2f, "Eq. 2, MSE(coarse action zeta, a_t) + MSE(final action, a_t)")):
+    for module, loss in ((bc_oh, "MSE to the expert's actions"), (c2f, "MSE(coarse action zeta, a_t) + MSE(final action, a_t), Eq. 2's two losses summed")):
         path = tmp_path / f"{module.METHOD}.npz"
         np.savez(path, **fake_demos(256))
         skip_evaluation(monkeypatch, module, 4.0)
