@@ -27,7 +27,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "dagger"
-LOSS = "MSE to the expert's labels (the demos', then the rounds')"
+LOSS = "MSE to the expert's labels (the demos', then the demos' and the rounds')"
 
 
 @dataclass
@@ -140,7 +140,7 @@ def split_budget(total: int, rounds: int) -> list:
 def collect_round(policy, expert, args, num_labels: int, beta: float, rng, device) -> dict:
     """num_labels steps of the beta-mix: the learner's inputs, the states, the expert's labels."""
     sensor = make_sensor_env(args, int(rng.integers(2**31)))
-    # Step the wrapped env: it gives the clean observation, and sensor.observation makes it partial.
+    # Step the env inside the sensor for the clean observation; sensor.observation makes it partial.
     env = sensor.env
     low = env.action_space.low
     high = env.action_space.high
@@ -213,7 +213,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         policy.eval()
         data = collect_round(policy, expert, args, num_labels, beta, rng, device)
         policy.train()
-        # Kept from round 0: the normaliser (the demos' statistics) and Adam's moments; lr restarts.
+        # Ross et al. train a new learner each round; here weights, normaliser and Adam carry on.
         inputs = torch.cat([inputs, torch.as_tensor(data["inputs"], device=device)])
         targets = torch.cat([targets, torch.as_tensor(data["labels"], device=device)])
         record = {"round": round_number, "beta": beta, "labels": num_labels}

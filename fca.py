@@ -27,7 +27,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "fca"
-LOSS = "F's MSE to a_t, last minibatch (adversary error: D's MSE to a_{t-1}, epoch mean)"
+LOSS = "the head F's MSE to a_t, last minibatch (adversary error: D's MSE to a_{t-1}, epoch mean)"
 
 
 @dataclass
@@ -88,6 +88,8 @@ class Args:
             raise UsageError(f"--adversary-lr-ratio must be positive, got {ratio}")
         if self.embedding_dim <= 0:
             raise UsageError(f"--embedding-dim must be positive, got {self.embedding_dim}")
+        if self.batch_size < 2:
+            raise UsageError(f"--batch-size must be 2 or more for BatchNorm, got {self.batch_size}")
 
 
 # ---- The method: FCA's networks G, F and D, their losses and the training loop ----
@@ -117,7 +119,7 @@ class Policy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         # G, the authors' Generator: 3 x [Linear (the first without bias), BatchNorm, LeakyReLU],
-        # then a Linear to e (their gan_mlp.py).
+        # then a Linear to e (their gan_mlp.py). G maximises D's error: BatchNorm bounds e's scale.
         blocks = []
         for i, in_dim in enumerate([obs_dim * history, hidden, hidden]):
             linear = nn.Linear(in_dim, hidden, bias=i > 0)
@@ -162,7 +164,7 @@ def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history:
 
 
 def previous_actions(actions: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:
-    """Row t holds a_{t-1} (stack_history's [a_{t-1}, a_t]); at an episode's start, a_t."""
+    """D's target for row t, a_{t-1} whatever H (as the authors'); at an episode's start, a_t."""
     pairs = stack_history(actions, episode_starts, 2)
     return pairs[:, : actions.shape[1]]
 
@@ -173,7 +175,7 @@ def adversary_step(policy: Policy, optimizer, embedding, actions, previous) -> t
     loss = F.mse_loss(prediction, previous)
     optimizer.zero_grad()
     loss.backward()
-    # e is detached, so only D has gradients, and the optimizer moves only D.
+    # e is detached, so only D has gradients (zero_grad set the others' to None): Adam moves only D.
     optimizer.step()
     return loss.detach()
 
@@ -224,7 +226,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     weight, lr_ratio = authors_setting(args.env, args.adversary_weight, args.adversary_lr_ratio)
     d_rate = lr_ratio * args.learning_rate
     rates = f"w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {d_rate:g}"
-    reference_error = f"predicting a_(t-1) = a_t has error {reference:.5f}"
+    reference_error = f"predicting a_{{t-1}} = a_t has error {reference:.5f}"
     print(f"seed {seed} | {rates}; adversary reference: {reference_error}")
     # One Adam with the authors' betas; D is a parameter group of its own, at its own rate.
     g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]

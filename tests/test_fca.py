@@ -167,7 +167,9 @@ def test_the_authors_hopper_setting_and_their_default_elsewhere():
 
 
 @pytest.mark.parametrize("flag, value, message", [("--adversary-weight", -1, "must be >= 0"), ("--adversary-lr-ratio", 0, "must be positive"),
-                                                   ("--hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive")])
+                                                   ("--hidden", 0, "must be positive"), ("--embedding-dim", 0, "must be positive"),
+                                                   # BatchNorm in training needs two rows: one raised torch's ValueError mid-run.
+                                                   ("--batch-size", 1, "must be 2 or more for BatchNorm, got 1")])
 def test_bad_method_parameters_are_rejected(flag, value, message):
     assert_usage_error(run_in_process("fca.py", flag, value), f"{flag} {message}")
 
@@ -176,6 +178,6 @@ def test_smoke_run_logs_the_adversary_error(tmp_path):
     stdout, summary = smoke_run("fca.py", tmp_path)
     progress = [line for line in stdout.splitlines() if "| epoch " in line]
     assert len(progress) == 2 and all("| adversary error " in line for line in progress)
-    assert "adversary reference: predicting a_(t-1) = a_t has error" in stdout
+    assert "adversary reference: predicting a_{t-1} = a_t has error" in stdout
     learning_rate = summary["args"]["learning_rate"]
     assert f"w = 2; learning rates: G and F {learning_rate:g}, D {2 * learning_rate:g}" in stdout, "Hopper: the authors' Hopper command"

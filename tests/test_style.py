@@ -52,7 +52,7 @@ CEILINGS = {
     "bc_so": 520,
     "history_dropout": 530,
     "c2f": 548,
-    "fca": 621,
+    "fca": 623,
     "keyframe": 615,
     "average_ensemble": 598,
     "dagger": 674,
