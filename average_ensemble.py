@@ -564,8 +564,8 @@ def run(args):
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)
     members = member_summary(per_seed)
-    # Scores: the mean return of the last 3 evaluations, of the ensemble and of each member.
-    header = f"\n{'seed':>6} | {'ensemble':>8}"
+    print("\nscores (the mean return of the last 3 evaluations) of the ensemble and its members")
+    header = f"{'seed':>6} | {'ensemble':>8}"
     for name in members:
         header += f" | {name:>8}"
     print(header)

@@ -31,7 +31,7 @@ class Args:
     frame_skip: int | None = None
     """simulator steps per action; None: the env's own (the expert's with --eval-only)"""
     seed: int = 1
-    """training seed (python, numpy, torch, envs); demos use seed 0, final evaluations 10000+"""
+    """training seed (torch, envs); demos use seed 0, final evaluations 10000+"""
     total_timesteps: int = 3_000_000
     """env steps in all (a --resume's earlier ones too), summed over the envs, whole rollouts"""
     learning_rate: float = 3e-4
@@ -259,7 +259,7 @@ def train(args: Args):
     done_buf = torch.zeros((args.num_steps, args.num_envs))
     val_buf = torch.zeros((args.num_steps, args.num_envs))
 
-    # A resumed run gets fresh episodes.
+    # A resumed run gets fresh episodes and torch's seed again: not an unbroken run's digits.
     raw_obs, _ = envs.reset(seed=args.seed + global_step)
     # Each env's discounted return, to scale rewards as NormalizeReward does, but reset at any end.
     discounted_return = np.zeros(args.num_envs)
@@ -461,7 +461,7 @@ def retargeted_expert(path: str, env_id: str):
     same_input = policy.net[0].in_features in observations
     same_output = policy.net[-1].out_features == env.action_space.shape[0]
     same_family = made_for.split("-")[0] == env_id.split("-")[0]
-    other = f"{path} is an expert for {made_for}, another env or other shapes than {env_id}'s"
+    other = f"{path} is an expert for {made_for}, whose family or shapes are not {env_id}'s"
     require(same_family and same_input and same_output, f"{other}: train one for {env_id}")
     return policy, made_for
 
@@ -485,7 +485,7 @@ def eval_only(args: Args):
     # A policy acts well at the rate it was trained at (the env's own, if not recorded).
     trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
-    there = f"{path} was trained at frame skip {trained_at}: --ship-to records its return there"
+    there = f"{path} was trained at frame skip {trained_at}: --ship-to records a return only there"
     fix = f"drop --frame-skip {frame_skip} or --ship-to"
     require(not args.ship_to or frame_skip == trained_at, f"{there}, {fix}")
     if frame_skip != native:
@@ -676,7 +676,7 @@ def make_demos(args: Args):
     if meta["expert_return"] is None:
         del meta["expert_return"]
         del meta["expert_frame_skip"]
-    # One thread, as the method files used when they made these demos: the same digits.
+    # One thread, as when the shipped demos were made: the same digits.
     torch.set_num_threads(1)
     print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")
     demos = generate_demos(args.env, frame_skip, expert, num_samples)

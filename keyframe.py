@@ -149,7 +149,7 @@ def action_prediction_errors(actions, episode_starts, k, spacing, epochs, batch_
     previous = previous_actions(actions, episode_starts, k, spacing)
     inputs = torch.as_tensor(previous, dtype=torch.float32, device=device)
     targets = torch.as_tensor(actions, dtype=torch.float32, device=device)
-    # The authors' model: one hidden layer of 300 and LeakyReLU(0.2), trained by Adam at lr 1e-3.
+    # The authors' model (one hidden layer of 300, LeakyReLU(0.2)) and Adam lr; not their schedule.
     layers = [nn.Linear(inputs.shape[1], 300), nn.LeakyReLU(0.2), nn.Linear(300, targets.shape[1])]
     model = nn.Sequential(*layers).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3, fused=True)
@@ -217,7 +217,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     at_change = changepoints(actions, starts)
     found = f"{is_key.sum()} of {len(is_key)} samples"
     found += f", {(is_key & at_change).sum()} of them at action changepoints"
-    found += f" (top 10% of ||a_t - a_(t-1)||; {at_change.sum()} in all)"
+    found += f" (top 10% of ||a_t - a_{{t-1}}||; {at_change.sum()} in all)"
     print(f"seed {seed} | keyframes (top {args.keyframe_fraction:.0%} of APE): {found}")
     policy = make_policy(args, obs_dim, act_dim, inputs).to(device)
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)

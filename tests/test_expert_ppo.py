@@ -279,7 +279,7 @@ def test_retarget_ships_an_expert_for_another_version_of_its_env(tmp_path):
     expert_ppo.load_expert(str(shipped), "Hopper-v5")  # accepted for v5 now
     for env, checkpoint_env in (("Walker2d-v5", "Hopper-v4"), ("HalfCheetah-v5", "Ant-v4")):
         refused = run_in_process("expert_ppo.py", "--env", env, "--eval-only", "--retarget", "--checkpoint", REPO_ROOT / "experts" / f"{checkpoint_env}.pt")
-        assert_usage_error(refused, f"is an expert for {checkpoint_env}, another env or other shapes than {env}'s: train one for {env}")
+        assert_usage_error(refused, f"is an expert for {checkpoint_env}, whose family or shapes are not {env}'s: train one for {env}")
     without = run_in_process("expert_ppo.py", "--env", "Hopper-v5", "--eval-only", "--checkpoint", REPO_ROOT / "experts" / "Hopper-v4.pt")
     assert_usage_error(without, "is an expert for Hopper-v4, not Hopper-v5")
 
