@@ -251,7 +251,7 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
-        known_envs = "Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+        known_envs = "Hopper, Walker2d, HalfCheetah or Ant, or a v5 env with observation_structure"
         raise UsageError(f"the velocity entries of {env_id} are unknown: use {known_envs}")
     start, end = known[family]
     return list(range(start, end))
@@ -449,12 +449,15 @@ def run(args):
     sizes = ["history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes"]
     for name in sizes + ["learning_rate", "frame_skip", "num_demo_samples", "workers"]:
         value = getattr(args, name)
-        if value is not None and value <= 0:
-            raise UsageError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    if args.obs_noise_std < 0:
-        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+        if value is not None and not 0 < value < np.inf:
+            raise UsageError(f"--{name.replace('_', '-')} must be positive and finite, got {value}")
+    if not 0 <= args.obs_noise_std < np.inf:
+        raise UsageError(f"--obs-noise-std must be >= 0 and finite, got {args.obs_noise_std}")
     if len(args.seeds) == 0 or len(set(args.seeds)) < len(args.seeds):
         raise UsageError(f"--seeds needs distinct seeds, got {args.seeds}: e.g. --seeds 1 2 3")
+    # Seeds that numpy's and torch's generators all take: whole numbers in [0, 2**32).
+    if min(args.seeds) < 0 or max(args.seeds) >= 2**32:
+        raise UsageError(f"--seeds must lie in [0, 2**32), got {args.seeds}")
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
 
@@ -469,7 +472,10 @@ def run(args):
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4
     demos, meta = load_demos(args, env)
     output_dir = args.output_dir or f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
-    os.makedirs(output_dir, exist_ok=True)
+    try:
+        os.makedirs(output_dir, exist_ok=True)
+    except OSError as error:
+        raise UsageError(f"cannot make {output_dir} ({error.strerror}): pass another --output-dir")
 
     workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:
@@ -504,7 +510,7 @@ def run(args):
     spread = f"mean ± std over {len(scores)} {seeds}"
     line = f"{args.env} {METHOD}: score {mean:.1f} ± {np.std(scores):.1f} ({spread})"
     # Demos from elsewhere (e.g. Minari) have no expert to compare with.
-    if "expert_return" in meta:
+    if meta.get("expert_return"):
         line += f", {mean / meta['expert_return']:.0%} of the expert's {meta['expert_return']:.0f}"
     print(f"result: {result_path}")
     print(line)

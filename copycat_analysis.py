@@ -142,7 +142,7 @@ def velocity_dims(env: gym.Env, env_id: str) -> list:
     known = {"Hopper": (5, 11), "Walker2d": (8, 17), "HalfCheetah": (8, 17), "Ant": (13, 27)}
     family = env_id.split("-")[0]
     if family not in known:
-        known_envs = "Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+        known_envs = "Hopper, Walker2d, HalfCheetah or Ant, or a v5 env with observation_structure"
         raise UsageError(f"the velocity entries of {env_id} are unknown: use {known_envs}")
     start, end = known[family]
     return list(range(start, end))
@@ -916,8 +916,8 @@ def check_args(args):
         raise UsageError(f"--eval-episodes must be positive, got {args.eval_episodes}")
     if args.history is not None and args.history <= 0:
         raise UsageError(f"--history must be positive, got {args.history}")
-    if args.obs_noise_std is not None and args.obs_noise_std < 0:
-        raise UsageError(f"--obs-noise-std must be >= 0, got {args.obs_noise_std}")
+    if args.obs_noise_std is not None and not 0 <= args.obs_noise_std < np.inf:
+        raise UsageError(f"--obs-noise-std must be >= 0 and finite, got {args.obs_noise_std}")
     if not 0 <= args.zeta_quantile < 0.5:
         raise UsageError(f"--zeta-quantile must lie in [0, 0.5), got {args.zeta_quantile}")
     if not 0 <= args.changepoint_quantile < 1:

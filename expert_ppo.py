@@ -144,14 +144,15 @@ class RunningMeanStd:
 
 # ---- Training: rollouts, advantages (GAE), the clipped update, checkpoints ----
 def validate(args: Args):
-    # require(value > 0) refuses a NaN too: NaN > 0 is False.
+    # require(0 < value < inf) refuses a NaN too: every comparison with NaN is False.
     positive = "total_timesteps num_envs num_steps num_minibatches update_epochs hidden"
     positive += " save_every_steps eval_every_steps train_eval_episodes eval_episodes threads"
     positive += " learning_rate clip_coef max_grad_norm"
     for name in positive.split():
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
-        require(value > 0, f"{flag} must be positive, got {value}")
+        require(0 < value < np.inf, f"{flag} must be positive and finite, got {value}")
+    require(0 <= args.seed < 2**32, f"--seed must lie in [0, 2**32), got {args.seed}")
     require(0 < args.gamma <= 1, f"--gamma must be in (0, 1], got {args.gamma}")
     require(0 <= args.gae_lambda <= 1, f"--gae-lambda must be in [0, 1], got {args.gae_lambda}")
     divides = (args.num_envs * args.num_steps) % args.num_minibatches == 0

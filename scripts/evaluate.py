@@ -126,6 +126,8 @@ def load_policy(path):
         args = saved_args(module, checkpoint, path)
         # Make the checkpoint's env at its control rate, or fail with one clear line.
         env = module.make_env(args.env, args.frame_skip)
+        # And an env whose velocity entries the method knows: its sensor needs them.
+        module.velocity_dims(env, args.env)
     except module.UsageError as error:
         raise UsageError(f"{path}: {error}")
     obs_dim = env.observation_space.shape[0]
@@ -174,6 +176,13 @@ def positive(text: str) -> int:
     return value
 
 
+def non_negative(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise ValueError(text)
+    return value
+
+
 def main(argv=None):
     parser = OneLineParser(prog="python scripts/evaluate.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", help="a seed<S>.pt written by a method file's --save-model")
@@ -184,7 +193,7 @@ def main(argv=None):
     )
     parser.add_argument(
         "--seed",
-        type=int,
+        type=non_negative,
         default=0,
         help="seed of the first episode (episode i: seed + i, its env and its sensor noise)",
     )

@@ -62,7 +62,7 @@ def test_velocity_entries_of_v4_and_v5_envs():
     with pytest.raises(bc_oh.UsageError, match="the velocity entries of Pendulum-v1 are unknown"):
         bc_oh.velocity_dims(gym.make("Pendulum-v1"), "Pendulum-v1")
     # A MuJoCo v4 env outside the table is told which envs are known, not to use a MuJoCo v4 env.
-    known = "unknown: use Hopper, Walker2d, HalfCheetah or Ant at v4, or a MuJoCo v5 env"
+    known = "unknown: use Hopper, Walker2d, HalfCheetah or Ant, or a v5 env with observation_structure"
     with pytest.raises(bc_oh.UsageError, match=f"the velocity entries of Swimmer-v4 are {known}$"):
         bc_oh.velocity_dims(gym.make("Swimmer-v4"), "Swimmer-v4")
 

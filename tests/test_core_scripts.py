@@ -95,8 +95,11 @@ def test_c2f_table3_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
 BAD_INPUTS = {
     "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
     "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 (the default) or Hopper-v5"),
-    "history 0": (["--history", 0], "--history must be positive, got 0"),
-    "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0, got -0.1"),
+    "history 0": (["--history", 0], "--history must be positive and finite, got 0"),
+    "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0 and finite, got -0.1"),
+    # NaN passes a `<= 0` check, and an infinite rate or noise trains on NaN: both are refused.
+    "nan learning rate": (["--learning-rate", "nan"], "--learning-rate must be positive and finite, got nan"),
+    "infinite noise": (["--obs-noise-std", "inf"], "--obs-noise-std must be >= 0 and finite, got inf"),
     "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: check --demos, or make it: "
                      "python expert_ppo.py --env Hopper-v4 --frame-skip 4 --num-demo-samples 20000 --make-demos"),
     "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found in {cwd}: check --demos"),

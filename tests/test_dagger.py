@@ -106,9 +106,9 @@ def test_bad_dagger_settings_are_rejected(tmp_path):
     missing = str(tmp_path / "none.pt")
     for flags, message in ((("--dagger-samples", 3, "--dagger-rounds", 4), "--dagger-samples must be at least --dagger-rounds 4, got 3"),
                            (("--dagger-samples", 0, "--dagger-rounds", 1), "--dagger-samples must be at least --dagger-rounds 1, got 0"),
-                           (("--dagger-epochs", 0), "--dagger-epochs must be positive, got 0"),
-                           (("--dagger-rounds", 0), "--dagger-rounds must be positive, got 0"),
-                           (("--dagger-beta-rounds", -1), "--dagger-beta-rounds must be positive, got -1")):
+                           (("--dagger-epochs", 0), "--dagger-epochs must be positive and finite, got 0"),
+                           (("--dagger-rounds", 0), "--dagger-rounds must be positive and finite, got 0"),
+                           (("--dagger-beta-rounds", -1), "--dagger-beta-rounds must be positive and finite, got -1")):
         assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT, *flags), message)
     # The expert is checked before the demos are loaded.
     assert_usage_error(run_in_process("dagger.py", "--expert", missing), f"expert checkpoint {missing} not found")

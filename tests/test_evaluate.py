@@ -117,6 +117,8 @@ REFUSED = {
     "other weights": (lambda path, tmp: edited(path, tmp, hidden=16), "its weights do not fit the bc_oh policy its args describe (size mismatch"),
     "a newer file's setting": (lambda path, tmp: edited(path, tmp, warp_drive=True), "records the setting 'warp_drive', which this bc_oh.py does not have"),
     "a method file's bad value": (lambda path, tmp: edited(path, tmp, env="Nope-v0"), "cannot make env 'Nope-v0'"),
+    # Its sensor raised the method's UsageError mid-evaluation, with a traceback.
+    "unknown velocities": (lambda path, tmp: edited(path, tmp, env="Swimmer-v4"), "the velocity entries of Swimmer-v4 are unknown"),
 }
 
 
@@ -133,6 +135,13 @@ def test_the_command_refuses_a_damaged_checkpoint_with_exit_2_and_no_traceback(t
     result = run_in_process("scripts/evaluate.py", damaged(trained("bc_oh")[0], tmp_path), "--seed", 3)
     assert result.returncode == 2 and result.stdout == ""
     assert_usage_error(result, "damaged.pt is not a readable checkpoint")
+
+
+def test_a_negative_seed_is_refused_in_one_line(trained):
+    """numpy's generators refuse a negative seed, with a traceback from inside the sensor."""
+    result = run_in_process("scripts/evaluate.py", trained("bc_oh")[0], "--seed", -1)
+    assert result.returncode == 2
+    assert_usage_error(result, "argument --seed: invalid non_negative value: '-1'")
 
 
 # ---- scripts/watch.py ----

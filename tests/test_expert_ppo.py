@@ -131,9 +131,13 @@ def test_shipped_expert_scores_well():
         (["--gamma", 1.5], "--gamma must be in (0, 1], got 1.5"),
         (["--gamma", "nan"], "--gamma must be in (0, 1], got nan"),
         (["--gae-lambda", -0.1], "--gae-lambda must be in [0, 1], got -0.1"),
+        # An infinite rate trained, and shipped, a NaN expert; a negative seed raised in gymnasium.
+        (["--learning-rate", "inf"], "--learning-rate must be positive and finite, got inf"),
+        (["--seed", -1], "--seed must lie in [0, 2**32), got -1"),
     ],
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
-         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda"],
+         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
+         "infinite-lr", "negative-seed"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkeypatch):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))

@@ -51,7 +51,7 @@ def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_
 
 
 def test_workers_must_be_positive():
-    assert_usage_error(run_in_process("bc_oh.py", "--workers", 0), "--workers must be positive, got 0")
+    assert_usage_error(run_in_process("bc_oh.py", "--workers", 0), "--workers must be positive and finite, got 0")
 
 
 def test_a_pool_worker_writes_each_printed_line_at_once(monkeypatch):

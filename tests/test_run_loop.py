@@ -97,8 +97,11 @@ def test_the_learning_rate_decays_linearly_to_zero(monkeypatch):
     assert rates == pytest.approx([1e-3, 7.5e-4, 5e-4, 2.5e-4])
 
 
-def test_a_repeated_seed_is_refused():
+def test_a_repeated_or_out_of_range_seed_is_refused():
     assert_usage_error(run_in_process("bc_oh.py", "--seeds", 1, 1), "--seeds needs distinct seeds, got [1, 1]")
+    # numpy's generators refuse a negative seed, torch's one of 2**64: in a worker, with a traceback.
+    assert_usage_error(run_in_process("bc_oh.py", "--seeds", 1, -1), "--seeds must lie in [0, 2**32), got [1, -1]")
+    assert_usage_error(run_in_process("bc_oh.py", "--seeds", 2**32), "--seeds must lie in [0, 2**32), got [4294967296]")
 
 
 def summary(folder, monkeypatch, capsys, score, meta, **overrides) -> str:
@@ -115,6 +118,19 @@ def test_the_summary_gives_the_share_of_the_expert_when_the_demos_name_one(tmp_p
     line = summary(tmp_path, monkeypatch, capsys, 1500.0, meta, seeds=[1, 2])
     assert line == "Hopper-v4 bc_oh: score 1500.0 ± 0.0 (mean ± std over 2 seeds), 50% of the expert's 3000"
     assert summary(tmp_path, monkeypatch, capsys, 1500.0, {}) == "Hopper-v4 bc_oh: score 1500.0 ± 0.0 (mean ± std over 1 seed)"  # no expert
+    # A null or zero expert return (demos made elsewhere) crashed, or printed inf%, after every seed had trained.
+    for unknown in (None, 0.0):
+        line = summary(tmp_path, monkeypatch, capsys, 1500.0, {**meta, "expert_return": unknown})
+        assert line == "Hopper-v4 bc_oh: score 1500.0 ± 0.0 (mean ± std over 1 seed)"
+
+
+def test_an_output_dir_that_cannot_be_made_is_refused_in_one_line(tmp_path):
+    rng = np.random.default_rng(0)
+    path = write_demos(tmp_path / "demos.npz", rng.normal(size=(100, 11)), rng.uniform(-1, 1, (100, 3)), np.arange(100) % 50 == 0)
+    (tmp_path / "afile").write_text("")
+    for output_dir, problem in ((tmp_path / "afile", "File exists"), (tmp_path / "afile" / "run", "Not a directory")):
+        result = run_in_process("bc_oh.py", "--demos", path, "--output-dir", output_dir, "--epochs", 1)
+        assert_usage_error(result, f"cannot make {output_dir} ({problem}): pass another --output-dir")
 
 
 def write_demos(path, observations, actions, starts):
