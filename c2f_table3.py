@@ -1,6 +1,6 @@
 # C2F's ablations (paper Table 3, section 5.3: CARLA there) and a capacity control; see README.md
-"""c2f.py with Table 3's choices open as flags, and two other readings and a capacity control. At
-its defaults this file is c2f.py: the same model, the same weights, the same printed digits.
+"""c2f.py with Table 3's choices open as flags, two other readings of where zeta joins, and a
+capacity control. At its defaults this file is c2f.py: the same model, weights and printed digits.
 
     --fusion              where sg(zeta) joins the policy model: late, into the last layer (c2f.py's
                           reading of the paper); Table 3's middle, into pi_theta's second layer, and
@@ -83,7 +83,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
-    """where sg(zeta) joins pi_theta: late (c2f.py's reading), output, middle, early, penultimate"""
+    """where sg(zeta) joins pi_theta: late (c2f.py's reading); the others: this file's docstring"""
     coarse_output: Literal["action", "feature"] = "action"
     """what the coarse model passes on: its action zeta (the paper's) or its last hidden feature"""
     coarse_input: Literal["current", "history"] = "current"
@@ -147,7 +147,7 @@ class Policy(nn.Module):
         fed_dim = act_dim
         if args.coarse_output == "feature":
             fed_dim = args.hidden
-        # pi_theta as in c2f.py: three hidden layers (BC-OH's MLP has two); split after the first.
+        # pi_theta as in c2f.py, split after its first layer; output and penultimate change its end.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim

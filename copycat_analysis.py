@@ -511,7 +511,7 @@ class C2FPolicy(nn.Module):
         fed_dim = act_dim
         if args.coarse_output == "feature":
             fed_dim = args.hidden
-        # pi_theta as in c2f.py: three hidden layers (BC-OH's MLP has two); split after the first.
+        # pi_theta as in c2f.py, split after its first layer; output and penultimate change its end.
         first_in = self.policy_in_dim
         if args.fusion == "early":
             first_in += fed_dim
