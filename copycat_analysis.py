@@ -924,6 +924,8 @@ def check_args(args):
         raise UsageError(
             f"--changepoint-quantile must lie in [0, 1), got {args.changepoint_quantile}"
         )
+    if not 0 <= args.seed < 2**32:
+        raise UsageError(f"--seed must lie in [0, 2**32), got {args.seed}")
     if args.demos is None and args.seed == 0:
         raise UsageError(
             "--seed 0 would regenerate the training demonstrations: "
@@ -1143,4 +1145,9 @@ if __name__ == "__main__":
         run(tyro.cli(Args))
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as error:
+        # A path that cannot be written: a folder, or a file in the way.
+        problem = f"cannot use {error.filename}: {error.strerror}"
+        print(f"error: {problem}: pass another path", file=sys.stderr)
         sys.exit(2)

@@ -85,14 +85,16 @@ def main(argv=None) -> int:
     status = 0
     for regime in args.regimes:
         folder = runs_dir(regime, args.results_dir).resolve()
+        grid = ["--methods", *args.methods, "--envs", *args.envs, "--seeds", *map(str, args.seeds), "--workers", str(args.workers),
+                "--results-dir", str(folder), "--scripts-dir", str(args.scripts_dir), *(["--dry-run"] if args.dry_run else [])]
+        flags = REGIMES[regime][0] + (["--save-model"] if args.save_model else [])
+        grid += [f"--extra-args={' '.join(flags)}"] if flags else []  # one word: argparse takes "--x" for a flag
+        run_grid.parse_options(grid)  # bad methods, envs or sizes stop here, before a commit is recorded
         if not args.dry_run:
             for method in args.methods:
                 record_commit(folder, commit, method)
         print(f"== {regime}: {REGIMES[regime][1]}", flush=True)
-        grid = ["--methods", *args.methods, "--envs", *args.envs, "--seeds", *map(str, args.seeds), "--workers", str(args.workers),
-                "--results-dir", str(folder), "--scripts-dir", str(args.scripts_dir), *(["--dry-run"] if args.dry_run else [])]
-        flags = REGIMES[regime][0] + (["--save-model"] if args.save_model else [])
-        status = max(status, run_grid.main(grid + ([f"--extra-args={' '.join(flags)}"] if flags else [])))  # one word: argparse takes "--x" for a flag
+        status = max(status, run_grid.main(grid))
     return status
 
 

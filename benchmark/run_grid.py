@@ -109,6 +109,10 @@ def available_methods(scripts_dir: Path) -> list:
 
 def check_options(options: Options):
     """Reject unknown methods and envs, and flags the runner owns, before anything runs."""
+    if options.slurm is not None and not options.slurm.strip():
+        raise UsageError("--slurm needs the name of the file to write, e.g. --slurm grid.sh")
+    if not options.scripts_dir.is_dir():
+        raise UsageError(f"--scripts-dir {options.scripts_dir} is not a folder: pass a checkout of this repository")
     known = available_methods(options.scripts_dir)
     for method in options.methods:
         if method not in known:
@@ -283,6 +287,9 @@ def last_line(path: Path) -> str:
 
 def last_line_of(text: str) -> str:
     lines = [line.strip() for line in text.splitlines() if line.strip()]
+    if lines and lines[-1].startswith("╰"):  # tyro's boxed error: its first line inside the box names the problem
+        top = max(i for i, line in enumerate(lines) if line.startswith("╭"))
+        lines = [line.strip("│ ") for line in lines[top + 1 : top + 2]] or lines
     return lines[-1][:200] if lines else "(empty log)"
 
 
@@ -407,7 +414,7 @@ def run_all(todo: list, options: Options) -> list:
 def main(argv=None) -> int:
     options = parse_options(argv)
     runs = combinations(options)
-    if options.slurm:
+    if options.slurm is not None:
         options.results_dir.mkdir(parents=True, exist_ok=True)  # SLURM does not create the --output folder
         write_text(options.slurm, slurm_script(runs, options))
         print(f"wrote {options.slurm}: a SLURM array job of {len(runs)} combinations; submit with `sbatch {options.slurm}`")

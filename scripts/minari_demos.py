@@ -103,6 +103,9 @@ def open_dataset(source: str):
 
 
 def import_dataset(source: str, out: str, num_samples=None):
+    # np.savez would add .npz to a name without it, and the method files look for that name.
+    if not out.endswith(".npz"):
+        raise UsageError(f"the demo file {out} must end in .npz, as the method files name theirs")
     dataset = open_dataset(source)
     spaces = (dataset.observation_space, dataset.action_space)
     if not all(isinstance(space, gym.spaces.Box) and len(space.shape) == 1 for space in spaces):

@@ -30,7 +30,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 # Import the sibling scripts/evaluate.py, which puts the repository root on sys.path.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from evaluate import load_policy, positive, read_checkpoint
+from evaluate import load_policy, non_negative, positive, read_checkpoint
 from benchmark.results import OneLineParser, UsageError, run_cli, written_atomically
 
 PROBE = (
@@ -250,7 +250,7 @@ def main(argv=None):
     )
     parser.add_argument(
         "--seed",
-        type=int,
+        type=non_negative,
         default=0,
         help="the episode: the one scripts/evaluate.py --seed S --episodes 1 plays",
     )

@@ -286,6 +286,27 @@ def test_slurm_script_names_every_combination_exactly_once(scripts, tmp_path, ca
     assert calls(scripts) == ["Ant-v4 2"] and read_result(result_path(results, "fake", "Ant-v4", [2]), "fake", "Ant-v4")["args"]["epochs"] == 2
 
 
+def test_the_grid_refuses_a_missing_scripts_dir_and_an_empty_slurm_name(scripts, tmp_path):
+    with pytest.raises(run_grid.UsageError, match="--scripts-dir .*nope is not a folder: pass a checkout"):
+        grid(tmp_path / "nope", tmp_path / "runs", "--methods", "fake", "--envs", "Hopper-v4", "--dry-run")
+    # An empty --slurm was taken as no --slurm: the whole grid ran here.
+    with pytest.raises(run_grid.UsageError, match="--slurm needs the name of the file to write"):
+        grid(scripts, tmp_path / "runs", "--methods", "fake", "--envs", "Hopper-v4", "--slurm", "")
+    assert calls(scripts) == []
+
+
+def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
+    box = """\
+╭─ Unrecognized options ──────────────╮
+│ Unrecognized options: --epoch, 1    │
+│ ─────────────────────────────────── │
+│ For full helptext, run bc_oh.py --help │
+╰─────────────────────────────────────╯
+"""
+    assert run_grid.last_line_of(box) == "Unrecognized options: --epoch, 1"
+    assert run_grid.last_line_of("training\nerror: --seeds needs distinct seeds\n") == "error: --seeds needs distinct seeds"
+
+
 @pytest.mark.parametrize("args, expected", [
     (["--methods", "bc_oh", "nope", "--envs", "Hopper-v4"], "unknown method 'nope': choose from"),
     (["--methods", "bc_oh", "--envs", "Hopper-v4", "Nope-v4"], "unknown env 'Nope-v4'"),

@@ -328,6 +328,8 @@ def test_c2f_without_an_action_zeta_and_a_non_model_file(saved, monkeypatch, tmp
 def test_bad_values(saved, monkeypatch):
     assert "--seed 0 would regenerate the training demonstrations" in bad_run(*saved, monkeypatch, seed=0)
     assert "--zeta-quantile" in bad_run(*saved, monkeypatch, zeta_quantile=0.5)
+    # gymnasium refused a negative reset seed with a traceback.
+    assert "--seed must lie in [0, 2**32), got -1" in bad_run(*saved, monkeypatch, seed=-1)
 
 
 def test_models_of_different_history_lengths_are_refused():

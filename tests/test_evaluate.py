@@ -157,6 +157,15 @@ def backend():
     return found
 
 
+def test_watch_refuses_a_negative_seed_and_an_output_that_is_a_folder(trained, backend, tmp_path):
+    bc_oh = trained("bc_oh")[0]
+    assert_usage_error(run_in_process("scripts/watch.py", bc_oh, "--seed", -1), "argument --seed: invalid non_negative value: '-1'")
+    # The GIF was drawn, then os.replace onto the folder raised IsADirectoryError.
+    (tmp_path / "dir.gif").mkdir()
+    result = run_script("scripts/watch.py", bc_oh, "--output", tmp_path / "dir.gif", "--max-steps", 3, env=dict(os.environ, MUJOCO_GL=backend))
+    assert_usage_error(result, f"cannot use {tmp_path / 'dir.gif'}: Is a directory: pass another path")
+
+
 def test_watch_draws_one_panel_per_policy_and_a_frame_per_step_and_plays_evaluates_episode(trained, backend, tmp_path, monkeypatch):
     monkeypatch.setenv("MUJOCO_GL", backend)  # the script's subprocess probes only this one
     (bc_oh, _), (c2f, _) = trained("bc_oh"), trained("c2f")

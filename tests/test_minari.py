@@ -178,6 +178,9 @@ def test_refusals(tmp_path):
     make_dataset("test/dict-v0", episodes, observation_space=space)
     refused(run_script("scripts/minari_demos.py", "import", "test/dict-v0", tmp_path / "x.npz"), "Dict")
     refused(run_script("scripts/minari_demos.py", "import", "test/missing-v0", tmp_path / "x.npz"), "minari download")
+    # np.savez added .npz to the temporary name, which the check then did not find, and the file stayed behind.
+    refused(run_script("scripts/minari_demos.py", "import", "test/pendulum-v0", tmp_path / "demos"), "demos must end in .npz")
+    assert not list(tmp_path.glob("demos*"))
     assert not (tmp_path / "x.npz").exists()
 
     demos = as_demos(random_episodes(gym.spaces.Box(-1, 1, (11,)), 3))

@@ -107,6 +107,14 @@ def test_the_regime_flags_reach_every_run(checkout, tmp_path, capsys):
     assert str(tmp_path / "map" / "fs1_hidden" / "runs" / "bc_so" / "Hopper-v4") in runs[0]
 
 
+def test_bad_flags_stop_the_regimes_before_a_commit_is_recorded(checkout, tmp_path):
+    """A commit.txt left by a refused run made the next run, from another commit, be refused as a mix of commits."""
+    with pytest.raises(UsageError, match="unknown method 'nope'"):
+        regimes.main(["--regimes", "fs1_hidden", "--methods", "nope", "--envs", "Hopper-v4", "--seeds", "1",
+                      "--scripts-dir", str(checkout), "--results-dir", str(tmp_path / "map")])
+    assert not list((tmp_path / "map").rglob("commit.txt"))
+
+
 TABLE3 = ["c2f_output", "c2f_middle", "c2f_early", "c2f_penultimate", "c2f_feature", "c2f_coarse_history",
           "c2f_coarse_history_policy_current", "c2f_no_stop_gradient", "c2f_two_stage", "c2f_no_coarse"]
 
