@@ -579,7 +579,7 @@ def run(args):
         raise UsageError(f"--obs-noise-std must be >= 0 and finite, got {args.obs_noise_std}")
     if len(args.seeds) == 0 or len(set(args.seeds)) < len(args.seeds):
         raise UsageError(f"--seeds needs distinct seeds, got {args.seeds}: e.g. --seeds 1 2 3")
-    # Seeds that numpy's and torch's generators all take: whole numbers in [0, 2**32).
+    # A range that numpy's and torch's generators both take (numpy's refuse a negative seed).
     if min(args.seeds) < 0 or max(args.seeds) >= 2**32:
         raise UsageError(f"--seeds must lie in [0, 2**32), got {args.seeds}")
     if args.cuda and not torch.cuda.is_available():
