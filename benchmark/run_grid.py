@@ -287,9 +287,9 @@ def last_line(path: Path) -> str:
 
 def last_line_of(text: str) -> str:
     lines = [line.strip() for line in text.splitlines() if line.strip()]
-    if lines and lines[-1].startswith("╰"):  # tyro's boxed error: its first line inside the box names the problem
-        top = max(i for i, line in enumerate(lines) if line.startswith("╭"))
-        lines = [line.strip("│ ") for line in lines[top + 1 : top + 2]] or lines
+    tops = [i for i, line in enumerate(lines) if line.startswith("╭")]
+    if tops and lines[-1].startswith("╰"):  # tyro's boxed error: its first line inside the box names the problem
+        lines = [lines[tops[-1] + 1].strip("│ ")]
     return lines[-1][:200] if lines else "(empty log)"
 
 

@@ -305,6 +305,7 @@ def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
 """
     assert run_grid.last_line_of(box) == "Unrecognized options: --epoch, 1"
     assert run_grid.last_line_of("training\nerror: --seeds needs distinct seeds\n") == "error: --seeds needs distinct seeds"
+    assert run_grid.last_line_of("a log cut after a box's top\n╰──╯\n") == "╰──╯"  # no box to read: the last line
 
 
 @pytest.mark.parametrize("args, expected", [
