@@ -222,7 +222,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
                 returns = evaluate(member, args, args.eval_episodes, 10_000 * seed + epoch, device)
                 member_evaluations[name].append((epoch, float(np.mean(returns))))
             policy.train()
-        if evaluating or epoch % max(1, args.epochs // 20) == 0:
+        if evaluating or epoch == 1 or epoch % max(1, args.epochs // 20) == 0:
             last_return = "n/a"
             if evaluations:
                 last_return = f"{evaluations[-1][1]:.1f}"

@@ -176,7 +176,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
             returns = evaluate(policy, args, args.eval_episodes, 10_000 * seed + epoch, device)
             evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if evaluating or epoch % max(1, args.epochs // 20) == 0:
+        if evaluating or epoch == 1 or epoch % max(1, args.epochs // 20) == 0:
             last_return = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             ms_per_step = 1000 * train_time / step
             minutes_left = (time.time() - start) / epoch * (args.epochs - epoch) / 60

@@ -95,9 +95,9 @@ class Args:
     """optional fourth model: the capacity control, `c2f_table3.py --no-coarse-action --save-model`
     (do(o_hist) and the copycat score only: it reads no zeta)"""
     demos: Optional[str] = None
-    """held-out demonstrations (.npz as `expert_ppo.py --make-demos` writes, read as the method
-    files read theirs, whole); default: a fresh expert rollout from reset seed --seed (the training
-    demos use seed 0), not cached"""
+    """held-out demonstrations (.npz as the method files read theirs, whole; refused if they share
+    steps with the models' training demos, as files of `expert_ppo.py --make-demos` do); default:
+    a fresh expert rollout from reset seed --seed (the training demos use seed 0), not cached"""
     expert: str = "experts/{env}.pt"
     """expert checkpoint that generates the held-out demos when --demos is not given"""
     num_demo_samples: int = 5000
@@ -414,6 +414,53 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
         args.num_demo_samples,
         seed=args.seed,
     )
+
+
+def training_demos_path(training: dict, env: gym.Env) -> tuple:
+    """(path, steps) of the demos a model trained on, by the rule of bc_oh.load_demos."""
+    env_id = training["env"]
+    native = getattr(env.unwrapped, "frame_skip", None)
+    frame_skip = training.get("frame_skip") or native
+    paper_n = 20000 if env_id.startswith("Hopper") else 10000
+    n = training.get("num_demo_samples") or paper_n
+    path = training.get("demos")
+    if path is None and frame_skip == native:
+        path = f"demos/{env_id}_{n}.npz"
+    elif path is None:
+        path = f"demos/{env_id}_fs{frame_skip}_{n}.npz"
+    # With --demos, a model trained on the file's first --num-demo-samples steps, or on all of them.
+    steps = training.get("num_demo_samples")
+    return path, steps
+
+
+def check_held_out(demos: dict, saved: dict, env: gym.Env, demos_path: str):
+    """Refuse held-out demos that share steps with a model's training demos: the analysis would
+    score the models on the states they were fit to. Every file `expert_ppo.py --make-demos` writes
+    is the expert's rollout from reset seed 0, so it starts with the training demos' steps."""
+    held_out = {row.tobytes() for row in demos["observations"].astype(np.float64)}
+    # The models' training files, each with the models that trained on it.
+    sources = {}
+    for method, training in saved.items():
+        source = training_demos_path(training, env)
+        sources.setdefault(source, []).append(method)
+    for (path, steps), methods in sources.items():
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                trained_on = data["observations"][:steps].astype(np.float64)
+        except Exception:
+            print(f"the training demos {path} of {', '.join(methods)} are not readable here:")
+            print("    whether --demos shares their steps is not checked")
+            continue
+        shared = 0
+        for row in trained_on:
+            if row.tobytes() in held_out:
+                shared += 1
+        if shared:
+            fix = "pass demos of another rollout, or leave --demos out (a fresh rollout, --seed)"
+            raise UsageError(
+                f"--demos {demos_path} shares {shared} steps with {path}, "
+                f"the training demos of {', '.join(methods)}: {fix}"
+            )
 
 
 # Copied from bc_oh.partially_observe
@@ -990,6 +1037,8 @@ def run(args):
     hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
 
     demos = heldout_demos(args, env, frame_skip)
+    if args.demos is not None:
+        check_held_out(demos, saved, env, args.demos)
     actions = demos["actions"].astype(np.float64)
     starts = demos["episode_starts"]
     # The expert's action scale, per dim.

@@ -274,7 +274,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
                     returns = evaluate(policy, args, args.eval_episodes, episodes_seed, device)
                     evaluations.append((epoch, float(np.mean(returns))))
             policy.train()
-        if evaluating or epoch % max(1, total_epochs // 20) == 0:
+        if evaluating or epoch == 1 or epoch % max(1, total_epochs // 20) == 0:
             last_return = f"{evaluations[-1][1]:.1f}" if evaluations else "n/a"
             ms_per_step = 1000 * train_time / step
             minutes_left = (time.time() - start) / epoch * (total_epochs - epoch) / 60

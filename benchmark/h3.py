@@ -159,6 +159,8 @@ def main(argv=None) -> int:
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"the regime map, with the control (default {RESULTS_DIR})")
     parser.add_argument("--reference", type=Path, default=REFERENCE_DIR, help=f"the reports at the paper's setting (default {REFERENCE_DIR})")
     args = parser.parse_args(argv)
+    if not args.reference.is_dir():
+        raise UsageError(f"reference folder {args.reference} not found: pass --reference, the folder of the reports at the paper's setting")
     reports, references, problems = gather(args.analysis_dir, args.reference)
     if not reports:
         raise UsageError(f"no valid {args.analysis_dir}/seed<S>/copycat_analysis.json: run copycat_analysis.py as docs/regimes.md shows")

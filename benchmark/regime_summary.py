@@ -58,6 +58,9 @@ def collect(regime: str, results_dir: Path, methods=METHODS):
 def expert_scores(expert_runs: Path, envs=ENVS):
     """{env: the PPO expert's score} for the envs (by default the map's) whose expert result reads, and a line per
     env without one."""
+    if not (expert_runs / EXPERT).is_dir():
+        # A mistyped folder would leave every expert-normalised mean out, with only a warning.
+        raise UsageError(f"no {EXPERT}/ folder in {expert_runs}: pass --expert-runs, the folder that holds {EXPERT}/<env>/result_seeds0.json")
     scores, problems = {}, []
     for env in envs:
         path = expert_runs / EXPERT / env / "result_seeds0.json"

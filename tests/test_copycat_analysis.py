@@ -225,10 +225,20 @@ def bad_run(workdir, paths, monkeypatch, **settings):
     return str(error.value)
 
 
-def test_held_out_demos_from_a_file_are_read_whole_as_the_method_files_read_theirs(saved, monkeypatch):
+def rollout_file(tmp_path, workdir, seed):
+    """A demo file like those of `expert_ppo.py --make-demos`, but the expert's 200 steps from reset seed `seed`."""
+    expert = ca.load_expert(str(workdir / "experts" / "Hopper-v4.pt"), "Hopper-v4")
+    demos = ca.generate_demos("Hopper-v4", None, expert, 200, seed=seed)
+    meta = {"env_id": "Hopper-v4", "frame_skip": 4, "seed": seed}
+    path = tmp_path / f"seed{seed}.npz"
+    np.savez(path, meta=np.array(json.dumps(meta)), **demos)
+    return path
+
+
+def test_held_out_demos_from_a_file_are_read_whole_as_the_method_files_read_theirs(saved, monkeypatch, tmp_path):
     """--demos: the file's steps, all of them (not --num-demo-samples'), are the held-out demos of the analysis."""
     workdir, paths = saved
-    demo_file = make_demos("Hopper-v4", 200)
+    demo_file = rollout_file(tmp_path, workdir, seed=1)
     monkeypatch.chdir(workdir)
     ca.run(ca.Args(**{m: str(paths[m]) for m in ca.METHODS}, demos=str(demo_file), eval_episodes=1, output_dir="from_file"))
     report = json.loads((workdir / "from_file" / "copycat_analysis.json").read_text())
@@ -236,6 +246,27 @@ def test_held_out_demos_from_a_file_are_read_whole_as_the_method_files_read_thei
         actions = data["actions"].astype(np.float64)
     assert report["demo_steps"] == 200 and report["args"]["num_demo_samples"] == 5000
     assert report["action_std"] == actions.std(0).clip(1e-6).tolist()
+
+
+def test_held_out_demos_that_share_the_models_training_steps_are_refused(saved, monkeypatch):
+    """A file of `expert_ppo.py --make-demos` is the expert's rollout from reset seed 0: its first steps are the ones
+    the models trained on (their demos/Hopper-v4_300.npz), so the analysis would not be held out."""
+    message = bad_run(*saved, monkeypatch, demos=str(make_demos("Hopper-v4", 200)))
+    assert "shares 200 steps with demos/Hopper-v4_300.npz, the training demos of bc_so, bc_oh, c2f" in message
+    assert "leave --demos out" in message
+
+
+def test_held_out_check_says_when_the_training_demos_are_not_here(saved, monkeypatch, tmp_path, capsys):
+    """Models whose training file is gone: the analysis runs on the given demos and says the overlap is unchecked."""
+    workdir, paths = saved
+    demo_file = rollout_file(tmp_path, workdir, seed=2)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "experts").symlink_to(workdir / "experts")
+    monkeypatch.chdir(elsewhere)
+    ca.run(ca.Args(**{m: str(paths[m]) for m in ca.METHODS}, demos=str(demo_file), eval_episodes=1, output_dir="out"))
+    assert "the training demos demos/Hopper-v4_300.npz of bc_so, bc_oh, c2f are not readable here" in capsys.readouterr().out
+    assert (elsewhere / "out" / "copycat_analysis.json").exists()
 
 
 def with_nan_at_row_17(tmp_path):

@@ -109,6 +109,16 @@ def test_no_report_is_one_line_and_exit_2(tmp_path):
     assert result.returncode == 2
 
 
+def test_a_mistyped_reference_folder_is_one_line_and_exit_2(planted, tmp_path):
+    """It would otherwise leave the reference column out, silently."""
+    argv, analysis, _ = planted
+    argv = [*argv]
+    argv[argv.index("--reference") + 1] = str(tmp_path / "nowhere")
+    result = subprocess.run([sys.executable, "-m", "benchmark.h3", *argv], cwd=REPO_ROOT, capture_output=True, text=True)
+    assert_usage_error(result, f"reference folder {tmp_path / 'nowhere'} not found: pass --reference")
+    assert result.returncode == 2 and not (analysis / "h3.md").exists()
+
+
 def test_the_committed_h3_page_is_what_the_tool_makes_from_the_committed_reports(tmp_path):
     committed = REPO_ROOT / h3.ANALYSIS_DIR
     if not (committed / "h3.md").exists():

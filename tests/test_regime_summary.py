@@ -189,11 +189,16 @@ def test_bad_input_is_one_line_and_exit_2(regime_map, tmp_path):
     result = cli("--results-dir", tmp_path / "nowhere")
     assert_usage_error(result, "results folder")
     assert result.returncode == 2
+    # A mistyped --expert-runs would leave every expert-normalised mean out with only a warning.
+    result = cli("--results-dir", results, "--expert-runs", tmp_path / "nowhere")
+    assert_usage_error(result, f"no expert/ folder in {tmp_path / 'nowhere'}: pass --expert-runs")
+    assert result.returncode == 2 and not (results / "summary.md").exists()
 
 
 def test_no_valid_results_is_exit_2(tmp_path):
     wrong = plant(runs_dir("fs1_noise", tmp_path), "bc_oh", "Hopper-v4", 1, [1.0] * 3)  # at the native rate
-    result = cli("--results-dir", tmp_path, "--expert-runs", tmp_path)
+    (tmp_path / "experts" / "expert").mkdir(parents=True)
+    result = cli("--results-dir", tmp_path, "--expert-runs", tmp_path / "experts")
     assert result.returncode == 2 and "Traceback" not in result.stderr
     lines = result.stderr.splitlines()
     assert lines[0] == f"left out {wrong}: not the fs1_noise settings (frame_skip 4 != 1)"

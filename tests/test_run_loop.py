@@ -81,6 +81,18 @@ def test_the_progress_line_gives_the_seeds_own_minutes_left(monkeypatch, capsys)
     assert evaluations == [(2, 3.0), (4, 3.0)] and ms_per_step == 12000.0
 
 
+def test_progress_lines_come_after_the_first_epoch_then_every_twentieth_of_the_run(monkeypatch, capsys):
+    """A user sees the first line, with its loss and pace, after one epoch rather than after 5% of the run; then a line
+    every epochs // 20 epochs, and one at each evaluation."""
+    skip_evaluation(monkeypatch, bc_oh, 1.0)
+    optimizer = torch.optim.Adam([torch.zeros(1, requires_grad=True)], lr=1e-3)
+    args = bc_oh.Args(seeds=[1], epochs=60, batch_size=8, eval_every=25, learning_rate=1e-3)
+    bc_oh.fit(args, torch.nn.Linear(1, 1), optimizer, lambda idx: torch.tensor(0.5), 8, 1, torch.device("cpu"))
+    printed = [int(line.split(" | ")[1].split()[1].split("/")[0]) for line in capsys.readouterr().out.splitlines()]
+    # epochs // 20 = 3; the evaluations come at epochs 25, 50 and 60.
+    assert printed == sorted({1, 25, 50, *range(3, 61, 3)})
+
+
 def test_the_learning_rate_decays_linearly_to_zero(monkeypatch):
     """Section 8.3: each step's rate is the initial one times the share of the steps still to come."""
     rates = []
