@@ -1045,6 +1045,13 @@ def run(args):
     scale = actions.std(0).clip(1e-6)
     lo = np.quantile(actions, args.zeta_quantile, axis=0)
     hi = np.quantile(actions, 1 - args.zeta_quantile, axis=0)
+    # do(zeta) sets zeta_d to lo_d, then to hi_d: with lo_d == hi_d its effect is not defined.
+    flat = np.flatnonzero(hi <= lo).tolist()
+    if flat:
+        q = args.zeta_quantile
+        spread = f"between their {q:g} and {1 - q:g} quantiles"
+        fix = "pass more held-out steps (--num-demo-samples, or a longer --demos)"
+        raise UsageError(f"the held-out actions of dims {flat} do not vary {spread}: {fix}")
     observed = partially_observe(demos["observations"], dims, std, hide, args.seed)
     histories = stack_history(observed, starts, history)
     # The steps with a previous action in their episode.

@@ -256,6 +256,18 @@ def test_held_out_demos_that_share_the_models_training_steps_are_refused(saved, 
     assert "leave --demos out" in message
 
 
+def test_held_out_actions_that_do_not_vary_are_refused(saved, monkeypatch, tmp_path):
+    """do(zeta_d) moves zeta_d from lo_d to hi_d, the demo actions' quantiles: a dim with lo_d == hi_d (e.g. 20 steps
+    that keep it at its bound) made its relative effect NaN in the report."""
+    path = rollout_file(tmp_path, saved[0], seed=3)
+    with np.load(path) as data:
+        arrays = dict(data)
+    arrays["actions"][:, 1] = 0.5
+    np.savez(path, **arrays)
+    message = bad_run(*saved, monkeypatch, demos=str(path))
+    assert "the held-out actions of dims [1] do not vary between their 0.05 and 0.95 quantiles: pass more" in message
+
+
 def test_held_out_check_says_when_the_training_demos_are_not_here(saved, monkeypatch, tmp_path, capsys):
     """Models whose training file is gone: the analysis runs on the given demos and says the overlap is unchecked."""
     workdir, paths = saved
