@@ -456,7 +456,7 @@ def check_held_out(demos: dict, saved: dict, env: gym.Env, demos_path: str):
             if row.tobytes() in held_out:
                 shared += 1
         if shared:
-            fix = "pass demos of another rollout, or leave --demos out (a fresh rollout, --seed)"
+            fix = "pass demos of another rollout, or leave --demos out (then: a fresh rollout)"
             raise UsageError(
                 f"--demos {demos_path} shares {shared} steps with {path}, "
                 f"the training demos of {', '.join(methods)}: {fix}"
