@@ -416,9 +416,8 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
     )
 
 
-def training_demos_path(training: dict, env: gym.Env) -> tuple:
-    """(path, steps) of the demos a model trained on, by the rule of bc_oh.load_demos."""
-    env_id = training["env"]
+def training_demos_path(training: dict, env: gym.Env, env_id: str) -> tuple:
+    """(path, steps) of the demos a model of env_id trained on, by the rule of bc_oh.load_demos."""
     native = getattr(env.unwrapped, "frame_skip", None)
     frame_skip = training.get("frame_skip") or native
     paper_n = 20000 if env_id.startswith("Hopper") else 10000
@@ -433,7 +432,7 @@ def training_demos_path(training: dict, env: gym.Env) -> tuple:
     return path, steps
 
 
-def check_held_out(demos: dict, saved: dict, env: gym.Env, demos_path: str):
+def check_held_out(demos: dict, saved: dict, env: gym.Env, env_id: str, demos_path: str):
     """Refuse held-out demos that share steps with a model's training demos: the analysis would
     score the models on the states they were fit to. Every file `expert_ppo.py --make-demos` writes
     is the expert's rollout from reset seed 0, so it starts with the training demos' steps."""
@@ -441,7 +440,7 @@ def check_held_out(demos: dict, saved: dict, env: gym.Env, demos_path: str):
     # The models' training files, each with the models that trained on it.
     sources = {}
     for method, training in saved.items():
-        source = training_demos_path(training, env)
+        source = training_demos_path(training, env, env_id)
         sources.setdefault(source, []).append(method)
     for (path, steps), methods in sources.items():
         try:
@@ -1038,7 +1037,7 @@ def run(args):
 
     demos = heldout_demos(args, env, frame_skip)
     if args.demos is not None:
-        check_held_out(demos, saved, env, args.demos)
+        check_held_out(demos, saved, env, args.env, args.demos)
     actions = demos["actions"].astype(np.float64)
     starts = demos["episode_starts"]
     # The expert's action scale, per dim.
