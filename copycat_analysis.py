@@ -172,8 +172,7 @@ class PartialObservation(gym.ObservationWrapper):
 def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
     """The gymnasium env, at another control rate when frame_skip is given."""
     if "-v" not in env_id:
-        versions = f"{env_id}-v4 (the default) or {env_id}-v5"
-        raise UsageError(f"env {env_id!r} has no version: use {versions}")
+        raise UsageError(f"env {env_id!r} has no version: use {env_id}-v4 or {env_id}-v5")
     try:
         env = gym.make(env_id)
     except Exception as error:
@@ -188,6 +187,8 @@ def make_env(env_id: str, frame_skip: int | None = None) -> gym.Env:
         raise UsageError(f"env {env_id!r} is not a MuJoCo env: leave --frame-skip out")
     # The same duration of an episode, and the same scale of returns, at the new rate.
     steps = round(env.spec.max_episode_steps * native / frame_skip)
+    if steps < 1:
+        raise UsageError(f"--frame-skip {frame_skip} outlasts an episode: pass a smaller one")
     env = gym.make(env_id, max_episode_steps=steps)
     env.unwrapped.frame_skip = frame_skip
     return gym.wrappers.TransformReward(env, lambda reward: reward * frame_skip / native)

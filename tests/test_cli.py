@@ -67,5 +67,5 @@ def test_an_env_id_without_a_version_is_refused_before_anything_else(script, tmp
 
     monkeypatch.chdir(tmp_path)
     result = run_in_process(script, "--env", "Hopper")
-    assert_usage_error(result, "env 'Hopper' has no version: use Hopper-v4 (the default) or Hopper-v5")
+    assert_usage_error(result, "env 'Hopper' has no version: use Hopper-v4 or Hopper-v5")
     assert result.returncode == 2

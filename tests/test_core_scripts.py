@@ -94,8 +94,10 @@ def test_c2f_table3_smoke_run_with_ablations_saves_a_rebuildable_model(workdir):
 
 BAD_INPUTS = {
     "unknown env": (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
-    "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 (the default) or Hopper-v5"),
+    "no version": (["--env", "Hopper"], "env 'Hopper' has no version: use Hopper-v4 or Hopper-v5"),
     "history 0": (["--history", 0], "--history must be positive and finite, got 0"),
+    # At frame skip 10000 a Hopper episode would have round(1000 * 4 / 10000) = 0 steps: gymnasium raised.
+    "frame skip over an episode": (["--frame-skip", 10000], "--frame-skip 10000 outlasts an episode: pass a smaller one"),
     "negative noise": (["--obs-noise-std", -0.1], "--obs-noise-std must be >= 0 and finite, got -0.1"),
     # NaN passes a `<= 0` check, and an infinite rate or noise trains on NaN: both are refused.
     "nan learning rate": (["--learning-rate", "nan"], "--learning-rate must be positive and finite, got nan"),

@@ -127,6 +127,7 @@ def test_shipped_expert_scores_well():
         (["--learning-rate", 0], "--learning-rate must be positive"),
         (["--frame-skip", 0], "--frame-skip must be positive"),
         (["--env", "Pendulum-v1", "--frame-skip", 2], "is not a MuJoCo env"),
+        (["--frame-skip", 10000], "--frame-skip 10000 outlasts an episode: pass a smaller one"),
         (["--eval-only", "--checkpoint", "{tiny}", "--frame-skip", 1, "--ship-to", "x.pt"], "was trained at frame skip 4"),
         (["--gamma", 1.5], "--gamma must be in (0, 1], got 1.5"),
         (["--gamma", "nan"], "--gamma must be in (0, 1], got nan"),
@@ -136,7 +137,7 @@ def test_shipped_expert_scores_well():
         (["--seed", -1], "--seed must lie in [0, 2**32), got -1"),
     ],
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
-         "zero-frame-skip", "frame-skip-non-mujoco", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
+         "zero-frame-skip", "frame-skip-non-mujoco", "frame-skip-over-an-episode", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
          "infinite-lr", "negative-seed"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkeypatch):

@@ -48,16 +48,16 @@ def skip_unwritten(name):
 
 
 CEILINGS = {
-    "bc_oh": 524,
-    "bc_so": 526,
-    "history_dropout": 536,
-    "c2f": 554,
-    "fca": 629,
-    "keyframe": 621,
-    "average_ensemble": 604,
-    "dagger": 680,
-    "c2f_table3": 650,
-    "expert_ppo": 699,
+    "bc_oh": 525,
+    "bc_so": 527,
+    "history_dropout": 537,
+    "c2f": 555,
+    "fca": 630,
+    "keyframe": 622,
+    "average_ensemble": 605,
+    "dagger": 681,
+    "c2f_table3": 651,
+    "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
 gives the history of each value): a file may shrink towards its target (file_sizes.TARGETS;
