@@ -671,7 +671,7 @@ def make_demos(args: Args):
     except Exception:
         made = {}
     settings = ("env_id", "expert_sha256", "num_samples", "frame_skip")
-    if all(made.get(key) == meta[key] for key in settings):
+    if isinstance(made, dict) and all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
     # A checkpoint never evaluated to the end (a stopped run's latest.pt): no return, nor its rate.

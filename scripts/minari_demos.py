@@ -207,6 +207,8 @@ def export_demos(path: str, dataset_id: str, env_id=None):
         raise UsageError(
             f"{path} is not a readable demo file ({type(error).__name__}): {FORMAT_FIX}"
         )
+    if not isinstance(meta, dict):
+        raise UsageError(f"{path}: its meta is not a JSON object: {FORMAT_FIX}")
     for key in ("observations", "actions", "episode_starts"):
         if key not in demos:
             raise UsageError(f"{path} has no {key!r} array: {FORMAT_FIX}")

@@ -190,6 +190,10 @@ def test_demos_follow_their_expert(tmp_path, monkeypatch):
     assert meta["expert_sha256"] == hashlib.sha256((tmp_path / "expert.pt").read_bytes()).hexdigest()
     assert not np.array_equal(retrained["actions"], first["actions"]), "the old expert's demos were kept"
 
+    np.savez(path, **{**retrained, "meta": np.array("[1, 2]")})  # a meta not of our format: rolled out again
+    assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
+    assert saved(path)[1]["expert_sha256"] == meta["expert_sha256"]
+
     os.remove("expert.pt")  # demos copied without their expert: loaded as they are
     assert np.array_equal(load_demos(bc_oh, num_demo_samples=120)[0]["actions"], retrained["actions"])
 
@@ -254,6 +258,19 @@ def test_demos_of_text_are_refused(tmp_path):
     """Text does not convert to numbers: the conversion's error is refused in one line."""
     with pytest.raises(bc_oh.UsageError, match=r"user.npz is not a readable demo file \(ValueError\): see the format in README.md$"):
         load_user_demos(user_demo_file(tmp_path, actions=np.full((200, 3), "a")))
+
+
+# Not a JSON object, or an expert's return that is not a number: the share of the expert's return is
+# printed after training, so a text there raised at the very end.
+@pytest.mark.parametrize("meta", ["[1, 2]", '"Hopper-v4"', '{"env_id": "Hopper-v4", "expert_return": "3000"}'])
+def test_a_meta_of_the_wrong_kind_is_refused_before_training(tmp_path, meta):
+    with pytest.raises(bc_oh.UsageError, match=r"user.npz: its meta is not of the format in README.md: fix or remove it$"):
+        load_user_demos(user_demo_file(tmp_path, meta=np.array(meta)))
+
+
+def test_a_meta_with_a_numeric_expert_return_loads(tmp_path):
+    meta = load_demos(bc_oh, demos=user_demo_file(tmp_path, meta=np.array('{"expert_return": 3000}')))[1]
+    assert meta == {"expert_return": 3000}
 
 
 def test_demos_record_what_a_dataset_format_needs():

@@ -190,6 +190,8 @@ def test_refusals(tmp_path):
     refused(result, "make it again with `python expert_ppo.py --env <env> --make-demos`")
     np.savez(tmp_path / "fs1.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 1})), **demos)
     refused(run_script("scripts/minari_demos.py", "export", tmp_path / "fs1.npz", "test/fs1-v0"), "frame skip 1")
+    np.savez(tmp_path / "list.npz", meta=np.array("[1, 2]"), **demos)  # raised an AttributeError on meta.get
+    refused(run_script("scripts/minari_demos.py", "export", tmp_path / "list.npz", "test/list-v0"), "list.npz: its meta is not a JSON object")
     np.savez(tmp_path / "new.npz", **demos)
     refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0"), "pass --env")
     refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0", "--env", "Walker2d-v4"), "width 11")
