@@ -198,7 +198,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
         optimizer.step()
         return loss
 
-    expert = load_expert(args.expert.format(env=args.env), args.env)
+    expert = load_expert(args.expert.replace("{env}", args.env), args.env)
     rng = np.random.default_rng(seed)
     budget = split_budget(args.dagger_samples, args.dagger_rounds)
     rounds = []
@@ -623,7 +623,7 @@ def run(args):
         args.frame_skip = getattr(env.unwrapped, "frame_skip", None)
     make_env(args.env, args.frame_skip)
     # The expert is queried online: a missing one fails now, not after round 0.
-    load_expert(args.expert.format(env=args.env), args.env)
+    load_expert(args.expert.replace("{env}", args.env), args.env)
     # Section 8.3's learning rates: 1e-5 for Hopper, 1e-4 for HalfCheetah and Ant (the rest too).
     if args.learning_rate is None:
         args.learning_rate = 1e-5 if args.env.startswith("Hopper") else 1e-4

@@ -468,7 +468,7 @@ def retargeted_expert(path: str, env_id: str):
 
 
 def eval_only(args: Args):
-    path = args.checkpoint.format(env=args.env)
+    path = args.checkpoint.replace("{env}", args.env)
     native = env_frame_skip(args.env)
     env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
@@ -649,7 +649,7 @@ def make_demos(args: Args):
     if num_samples is None:
         num_samples = 20000 if args.env.startswith("Hopper") else 10000
     require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
-    expert_path = args.checkpoint.format(env=args.env)
+    expert_path = args.checkpoint.replace("{env}", args.env)
     path = demo_path(args.env, frame_skip, native, num_samples)
     expert = load_expert(expert_path, args.env)
     with open(expert_path, "rb") as file:

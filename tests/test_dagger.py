@@ -112,6 +112,9 @@ def test_bad_dagger_settings_are_rejected(tmp_path):
         assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT, *flags), message)
     # The expert is checked before the demos are loaded.
     assert_usage_error(run_in_process("dagger.py", "--expert", missing), f"expert checkpoint {missing} not found")
+    # Braces other than {env} are part of the path: str.format raised KeyError or ValueError on them.
+    for braces in ("{x}.pt", "{.pt"):
+        assert_usage_error(run_in_process("dagger.py", "--expert", braces), f"expert checkpoint {braces} not found")
     assert_usage_error(run_in_process("dagger.py", "--expert", EXPERT.format(env="Ant-v4")), "is an expert for Ant-v4, not Hopper-v4")
     # One label a round is enough: the run gets past DAgger's checks to the demo file.
     ok = ("--dagger-samples", 4, "--dagger-rounds", 4, "--demos", str(tmp_path / "none.npz"))

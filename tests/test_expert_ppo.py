@@ -121,6 +121,7 @@ def test_shipped_expert_scores_well():
         (["--env", "Nope-v0"], "cannot make env 'Nope-v0'"),
         (["--env", "CartPole-v1"], "has discrete actions: imitation needs continuous ones"),
         (["--eval-only", "--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
+        (["--eval-only", "--checkpoint", "my{{x}}.pt"], "expert checkpoint my{x}.pt not found"),
         (["--eval-only", "--checkpoint", "garbage.pt"], "garbage.pt is not a readable expert checkpoint"),
         (["--env", "Walker2d-v4", "--eval-only", "--checkpoint", "{tiny}"], "is an expert for Hopper-v4, not Walker2d-v4"),
         (["--total-timesteps", 0], "--total-timesteps must be positive"),
@@ -136,7 +137,7 @@ def test_shipped_expert_scores_well():
         (["--learning-rate", "inf"], "--learning-rate must be positive and finite, got inf"),
         (["--seed", -1], "--seed must lie in [0, 2**32), got -1"),
     ],
-    ids=["unknown-env", "discrete-env", "missing-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
+    ids=["unknown-env", "discrete-env", "missing-checkpoint", "braces-in-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
          "zero-frame-skip", "frame-skip-non-mujoco", "frame-skip-over-an-episode", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
          "infinite-lr", "negative-seed"],
 )
@@ -390,8 +391,9 @@ def test_make_demos_keeps_a_file_of_the_same_expert_and_remakes_one_of_another(d
     (["--num-demo-samples", -3], "--num-demo-samples must be more than 1, got -3"),
     (["--num-demo-samples", 0], "--num-demo-samples must be more than 1, got 0"),
     (["--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
+    (["--checkpoint", "my{x}.pt"], "expert checkpoint my{x}.pt not found"),
     (["--env", "Walker2d-v4", "--checkpoint", SHIPPED_EXPERT], "is an expert for Hopper-v4, not Walker2d-v4"),
-], ids=["one-sample", "negative-samples", "zero-samples", "missing-checkpoint", "other-env-checkpoint"])
+], ids=["one-sample", "negative-samples", "zero-samples", "missing-checkpoint", "braces-in-checkpoint", "other-env-checkpoint"])
 def test_make_demos_refuses_bad_input_in_one_line(args, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = run_in_process("expert_ppo.py", "--make-demos", *args)
