@@ -152,11 +152,17 @@ def validate(args: Args):
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
         require(0 < value < np.inf, f"{flag} must be positive and finite, got {value}")
+    # No entropy bonus and no time limit are 0; a NaN or negative weight trains a wrong expert.
+    for name in ["ent_coef", "vf_coef", "max_minutes"]:
+        value = getattr(args, name)
+        flag = "--" + name.replace("_", "-")
+        require(0 <= value < np.inf, f"{flag} must lie in [0, inf), got {value}")
     require(0 <= args.seed < 2**32, f"--seed must lie in [0, 2**32), got {args.seed}")
     require(0 < args.gamma <= 1, f"--gamma must be in (0, 1], got {args.gamma}")
     require(0 <= args.gae_lambda <= 1, f"--gae-lambda must be in [0, 1], got {args.gae_lambda}")
-    divides = (args.num_envs * args.num_steps) % args.num_minibatches == 0
-    require(divides, "--num-minibatches must divide num-envs * num-steps")
+    batch_size = args.num_envs * args.num_steps
+    fits = batch_size % args.num_minibatches == 0 and batch_size >= 2 * args.num_minibatches
+    require(fits, "--num-minibatches must divide num-envs * num-steps, 2 steps a minibatch or more")
 
 
 def train(args: Args):
@@ -375,8 +381,7 @@ def train(args: Args):
     # The final evaluation: seeds 10000, 10001, ..., as --eval-only.
     policy = ExpertPolicy(checkpoint())
     returns = evaluate(policy, args.env, args.eval_episodes, 10_000, args.frame_skip)
-    mean = float(np.mean(returns))
-    std = float(np.std(returns))
+    mean, std = float(np.mean(returns)), float(np.std(returns))
     save_atomically(checkpoint(mean), latest_path)
     print(f"wrote {latest_path} (the last policy)")
     if best_return > -np.inf:
@@ -635,12 +640,6 @@ def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int 
     }
 
 
-def demo_path(env_id: str, frame_skip: int, native: int, num_samples: int) -> str:
-    """Where --make-demos writes, and where the imitation files look when --demos is not given."""
-    rate = "" if frame_skip == native else f"_fs{frame_skip}"
-    return f"demos/{env_id}{rate}_{num_samples}.npz"
-
-
 def make_demos(args: Args):
     """Roll the expert out into demos/, unless a file of the same expert and settings is there."""
     native = env_frame_skip(args.env)
@@ -650,7 +649,8 @@ def make_demos(args: Args):
         num_samples = 20000 if args.env.startswith("Hopper") else 10000
     require(num_samples > 1, f"--num-demo-samples must be more than 1, got {num_samples}")
     expert_path = args.checkpoint.replace("{env}", args.env)
-    path = demo_path(args.env, frame_skip, native, num_samples)
+    rate = "" if frame_skip == native else f"_fs{frame_skip}"
+    path = f"demos/{args.env}{rate}_{num_samples}.npz"
     expert = load_expert(expert_path, args.env)
     with open(expert_path, "rb") as file:
         expert_sha256 = hashlib.sha256(file.read()).hexdigest()

@@ -68,7 +68,8 @@ def make_demos(env="Hopper-v4", num_samples=300, frame_skip=None) -> Path:
         (DEMO_CACHE / "experts").symlink_to(REPO_ROOT / "experts", target_is_directory=True)
     args = expert_ppo.Args(env=env, make_demos=True, num_demo_samples=num_samples, frame_skip=frame_skip)
     native, rate = expert_ppo.env_frame_skip(env), expert_ppo.env_frame_skip(env, frame_skip)
-    path = DEMO_CACHE / expert_ppo.demo_path(env, rate, native, num_samples)
+    suffix = "" if rate == native else f"_fs{rate}"  # where --make-demos writes, and the method files look
+    path = DEMO_CACHE / "demos" / f"{env}{suffix}_{num_samples}.npz"
     if not path.exists():
         with contextlib.chdir(DEMO_CACHE), contextlib.redirect_stdout(None):
             expert_ppo.make_demos(args)

@@ -136,10 +136,16 @@ def test_shipped_expert_scores_well():
         # An infinite rate trained, and shipped, a NaN expert; a negative seed raised in gymnasium.
         (["--learning-rate", "inf"], "--learning-rate must be positive and finite, got inf"),
         (["--seed", -1], "--seed must lie in [0, 2**32), got -1"),
+        # NaN weights raised in torch.distributions, a negative one trained a wrong expert in silence.
+        (["--ent-coef", "nan"], "--ent-coef must lie in [0, inf), got nan"),
+        (["--vf-coef", -1], "--vf-coef must lie in [0, inf), got -1.0"),
+        # A minibatch of one step normalised its advantage by a NaN std, and raised.
+        (["--num-envs", 1, "--num-steps", 4, "--num-minibatches", 4], "--num-minibatches must divide num-envs * num-steps, 2 steps a minibatch or more"),
+        (["--num-minibatches", 3], "--num-minibatches must divide num-envs * num-steps, 2 steps a minibatch or more"),
     ],
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "braces-in-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
          "zero-frame-skip", "frame-skip-non-mujoco", "frame-skip-over-an-episode", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
-         "infinite-lr", "negative-seed"],
+         "infinite-lr", "negative-seed", "nan-ent-coef", "negative-vf-coef", "minibatch-of-one", "minibatches-not-dividing"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkeypatch):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
@@ -150,6 +156,13 @@ def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkey
     assert_usage_error(result, message)
     assert result.returncode == 2
     assert not (tmp_path / "run").exists()  # failed before training started
+
+
+def test_a_negative_time_limit_is_refused():
+    """(The test above passes --max-minutes itself.) A negative limit stopped after the first rollout."""
+    with pytest.raises(expert_ppo.UsageError, match=r"^--max-minutes must lie in \[0, inf\), got -1.0$"):
+        expert_ppo.validate(expert_ppo.Args(max_minutes=-1.0))
+    expert_ppo.validate(expert_ppo.Args(max_minutes=0.0))  # 0: no limit
 
 
 @pytest.mark.parametrize("old, new", [("--run-dir", "--output-dir"), ("--eval-every", "--eval-every-steps"), ("--save-every", "--save-every-steps")])
@@ -359,7 +372,6 @@ def test_make_demos_names_its_file_by_frame_skip_and_sample_count(demo_folder, c
     assert rollouts == [("Hopper-v4", 1, 120), ("Hopper-v4", 4, 120), ("Hopper-v4", 4, 20000)]
     assert sorted(path.name for path in (demo_folder / "demos").iterdir()) == ["Hopper-v4_120.npz", "Hopper-v4_20000.npz",
                                                                                 "Hopper-v4_fs1_120.npz"]
-    assert expert_ppo.demo_path("Walker2d-v4", 4, 4, 10000) == "demos/Walker2d-v4_10000.npz"
 
 
 def test_make_demos_keeps_a_file_of_the_same_expert_and_remakes_one_of_another(demo_folder, capsys, monkeypatch):
