@@ -5,7 +5,7 @@ more layer maps that feature and sg(zeta) to a_t.
 
 Copying zeta, a guess of a_t from o_t alone, is a simpler shortcut than recovering a_{t-1} from the
 history to copy it (the copycat shortcut, sections 3.2 and 4.3): the policy learns to refine zeta.
-Table 3's ablations, on MuJoCo: c2f_table3.py. Code marked `# Copied from bc_oh.a..b` is bc_oh.py's.
+Table 3's ablations: c2f_table3.py. `# Copied from bc_oh.first..last` marks bc_oh.py's code, as is.
 
     python c2f.py --env Hopper-v4
 """
@@ -97,7 +97,7 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """C2F as the paper draws it (section 8.3, Fig. 10): the coarse model, then the policy model."""
+    """C2F as the paper draws it (section 8.3, Fig. 10): coarse model pi_phi, policy pi_theta."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()
@@ -105,9 +105,9 @@ class Policy(nn.Module):
         self.obs_dim = obs_dim
         # The coarse model pi_phi: an MLP on the current frame o_t only (as BC-SO); it outputs zeta.
         self.coarse = mlp(obs_dim, act_dim, hidden)
-        # pi_theta's encoder, section 8.3's three-layer MLP on the history: it outputs a feature
-        # (section 4.2), not an action, so pi_theta is one layer deeper than bc_oh.py's network.
-        # It is split after its first layer as in c2f_table3.py, where --fusion middle joins zeta.
+        # pi_theta's encoder: section 8.3's three-layer MLP on the history. It ends in a feature
+        # that zeta joins (section 4.2's "intermediate feature"; c2f_table3.py: other readings).
+        # Split after its first layer like c2f_table3.py's (--fusion middle joins zeta there).
         self.policy_first = nn.Sequential(nn.Linear(obs_dim * history, hidden), nn.ReLU())
         layers = [nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()]
         self.policy_rest = nn.Sequential(*layers)
@@ -134,7 +134,7 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 
 
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t: [o_{t-H+1}, ..., o_t], oldest first; before t's episode, its first frame repeated."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []
@@ -149,7 +149,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
+    # Section 5.1: noise on the demos' velocities (drawn once), then histories of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     observed = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -160,8 +160,8 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     optimizer = torch.optim.Adam(policy.parameters(), lr=args.learning_rate, fused=True)
 
     def train_step(idx):
-        # Eq. 2's two MSE losses (section 8.3), summed. zeta is detached, so each loss trains one
-        # model: zeta's trains pi_phi, and the final action's trains pi_theta (encoder and head).
+        # Eq. 2 (section 4.2) with section 8.3's MSE: two losses, summed. zeta is detached, so each
+        # loss trains one model: zeta's trains pi_phi, the final action's pi_theta (encoder, head).
         zeta, final = policy.coarse_and_final(inputs[idx])
         actions = targets[idx]
         final_loss = F.mse_loss(final, actions)
@@ -217,7 +217,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # ---- Evaluation ----
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """The deterministic policy's returns, one episode per env; env i (start, noise): seed + i."""
+    """The deterministic policy's returns, one episode per env; seed + i: env i's start, noise."""
     env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
@@ -328,7 +328,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# At import, so that spawned workers get it too: gymnasium's warnings (v4's deprecation) stay quiet.
+# At import, so spawned workers get them too: gymnasium's errors only, MuJoCo's warnings filtered.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -492,7 +492,7 @@ def run(args):
     if args.cuda and not torch.cuda.is_available():
         raise UsageError("--cuda, but torch sees no CUDA GPU here: leave --cuda out")
 
-    # Bad env ids and frame skips fail here, not in a worker; flags left None get the values used.
+    # Bad env ids, velocity layouts, frame skips fail here, not in a worker; None flags get values.
     env = make_env(args.env)
     velocity_dims(env, args.env)
     if args.frame_skip is None:

@@ -479,7 +479,7 @@ def partially_observe(observations, dims: list, std: float, hide: bool, seed: in
 
 # Copied from bc_oh.stack_history
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t: [o_{t-H+1}, ..., o_t], oldest first; before t's episode, its first frame repeated."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []

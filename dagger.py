@@ -121,7 +121,7 @@ def make_policy(args, obs_dim: int, act_dim: int, inputs: torch.Tensor) -> nn.Mo
 
 
 def stack_history(observations: np.ndarray, episode_starts: np.ndarray, history: int) -> np.ndarray:
-    """Row t: [o_{t-H+1}, ..., o_t], oldest first; before t's episode, its first frame repeated."""
+    """Row t: [o_{t-H+1}, ..., o_t], oldest first; a frame before t's episode is its first frame."""
     index = np.arange(len(observations))
     first_of_episode = np.maximum.accumulate(np.where(episode_starts, index, 0))
     frames = []
@@ -180,7 +180,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     env = make_env(args.env)
     obs_dim = env.observation_space.shape[0]
     act_dim = env.action_space.shape[0]
-    # The policy sees partial observations (section 5.1), stacked into a history of H frames.
+    # Section 5.1: noise on the demos' velocities (drawn once), then histories of H frames.
     dims = velocity_dims(env, args.env)
     observations = demos["observations"]
     observed = partially_observe(observations, dims, args.obs_noise_std, args.hide_velocities, seed)
@@ -289,7 +289,7 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
 # Copied from bc_oh.evaluate..load_demos
 @torch.no_grad()
 def evaluate(policy: nn.Module, args, episodes: int, seed: int, device) -> list:
-    """The deterministic policy's returns, one episode per env; env i (start, noise): seed + i."""
+    """The deterministic policy's returns, one episode per env; seed + i: env i's start, noise."""
     env_fns = [functools.partial(make_sensor_env, args, seed + i) for i in range(episodes)]
     autoreset = gym.vector.AutoresetMode.SAME_STEP
     envs = gym.vector.SyncVectorEnv(env_fns, autoreset_mode=autoreset)
@@ -400,7 +400,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# At import, so that spawned workers get it too: gymnasium's warnings (v4's deprecation) stay quiet.
+# At import, so spawned workers get them too: gymnasium's errors only, MuJoCo's warnings filtered.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -616,7 +616,7 @@ def run(args):
         rounds = f"--dagger-rounds {args.dagger_rounds}"
         raise UsageError(f"--dagger-samples must be at least {rounds}, got {args.dagger_samples}")
 
-    # Bad env ids and frame skips fail here, not in a worker; flags left None get the values used.
+    # Bad env ids, velocity layouts, frame skips fail here, not in a worker; None flags get values.
     env = make_env(args.env)
     velocity_dims(env, args.env)
     if args.frame_skip is None:
