@@ -1,4 +1,4 @@
-# Average-Ensemble of BC-SO and BC-OH (paper section 5.1, Table 2); see README.md
+# Average-Ensemble of BC-SO and BC-OH (paper section 8.1, Table 2); see README.md
 """Average-Ensemble: each seed trains a BC-SO policy (the current frame o_t) and a BC-OH policy
 (the last H frames), and acts with the mean of their raw actions, clipped after.
 

@@ -2,8 +2,8 @@
 """FCA: BC-OH whose embedding of the history is stripped of what it says about the previous action.
 
 An encoder G maps the history [o_{t-H+1}, ..., o_t] to an embedding e, a head F maps e to a_t, and
-an adversary D predicts the previous action a_{t-1} from e and the true a_t. In turns, D learns to
-predict a_{t-1}, then G and F fit a_t while raising D's error: copying the last action stops paying.
+an adversary D predicts a_{t-1} from e and the true a_t (section 8.1: a_{t-1:t-H}; the authors'
+code: a_{t-1}). In turns, D learns that, then G and F fit a_t while raising D's error.
 
     python fca.py --env Hopper-v4
 """
@@ -95,7 +95,7 @@ class Args:
 
 # ---- The method: FCA's networks G, F and D, their losses and the training loop ----
 def mlp(in_dim: int, out_dim: int, hidden: int) -> nn.Sequential:
-    """The authors' F and D: LeakyReLU(0.2) on the input, Linear, LeakyReLU(0.2), Linear."""
+    """Not bc_oh.py's MLP: the authors' F and D, LeakyReLU(0.2), Linear, LeakyReLU(0.2), Linear."""
     layers = [nn.LeakyReLU(0.2), nn.Linear(in_dim, hidden), nn.LeakyReLU(0.2)]
     return nn.Sequential(*layers, nn.Linear(hidden, out_dim))
 
@@ -120,7 +120,7 @@ class Policy(nn.Module):
         super().__init__()
         self.normalize = Normalizer(inputs)
         # G, the authors' Generator: 3 x [Linear (the first without bias), BatchNorm, LeakyReLU],
-        # then a Linear to e (their gan_mlp.py). G maximises D's error: BatchNorm bounds e's scale.
+        # then a plain Linear to e (their gan_mlp.py): e itself is neither normalised nor bounded.
         blocks = []
         for i, in_dim in enumerate([obs_dim * history, hidden, hidden]):
             linear = nn.Linear(in_dim, hidden, bias=i > 0)
@@ -228,7 +228,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
     rates = f"w = {weight:g}; learning rates: G and F {args.learning_rate:g}, D {d_rate:g}"
     reference_error = f"predicting a_{{t-1}} = a_t has error {reference:.5f}"
     print(f"seed {seed} | {rates}; adversary reference: {reference_error}")
-    # One Adam with the authors' betas; D is a parameter group of its own, at its own rate.
+    # The authors' two Adams (betas 0.5, 0.999) as one: D is a group of its own, at its own rate.
     g_and_f = [*policy.encoder.parameters(), *policy.head.parameters()]
     groups = [{"params": g_and_f}, {"params": policy.adversary.parameters(), "lr": d_rate}]
     optimizer = torch.optim.Adam(groups, lr=args.learning_rate, betas=(0.5, 0.999), fused=True)

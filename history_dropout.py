@@ -1,4 +1,4 @@
-# History-Dropout of ChauffeurNet (Bansal et al. 2019) as the paper runs it (Table 2); see README.md
+# History-Dropout of ChauffeurNet (Bansal et al. 2019) as paper section 8.1 runs it; see README.md
 """History-Dropout: BC-OH with a Dropout layer on the past frames of the history, never on o_t.
 
 Training zeroes each normalised entry of [o_{t-H+1}, ..., o_{t-1}] with probability p =

@@ -3,8 +3,8 @@
 predicts a_t from the previous actions errs most.
 
 Those are often the moments where the expert's action changes: the ones a copycat policy misses. As
-the authors do, the action-prediction model is trained first (once a seed); the samples with the top
-10% of its error (APE) weigh 5 in the behavioural-cloning loss, all others 1.
+the authors do, the action-prediction model is trained first, once per seed; the samples with the
+top 10% of its error (APE) weigh 5 in the behavioural-cloning loss, all others 1.
 
     python keyframe.py --env Hopper-v4
 """
@@ -75,9 +75,9 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     keyframe_k: int = 4
-    """K, how many previous actions the action-prediction model sees (the authors' CARLA: 9)"""
+    """K, previous actions the action-prediction model sees (MuJoCo: ours; the authors' CARLA: 9)"""
     keyframe_spacing: int = 1
-    """steps between those actions: a_{t-Ks}, ..., a_{t-2s}, a_{t-s} (authors' CARLA code: 3)"""
+    """steps between them: a_{t-Ks}, ..., a_{t-2s}, a_{t-s} (MuJoCo: ours; the authors' CARLA: 3)"""
     keyframe_fraction: float = 0.1
     """share of the samples, those of highest APE, that are keyframes, in (0, 1]"""
     keyframe_weight: float = 5.0
@@ -227,7 +227,7 @@ def train_seed(args, demos: dict, seed: int, device) -> tuple:
             weight = weights[idx]
         else:
             weight = softmax_weights(ape[idx], args.keyframe_temperature)
-        # Behavioural cloning, each sample's squared error to the expert's action weighted.
+        # BC, each sample's squared error times its weight, not renormalised (as the authors do).
         error = ((policy(inputs[idx]) - targets[idx]) ** 2).mean(1)
         loss = (weight * error).mean()
         optimizer.zero_grad()
