@@ -393,8 +393,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
         raise UsageError(f"{message}: see the format in README.md")
-    # A file without meta loads: it is taken to come from elsewhere, at the env's own rate.
-    if not isinstance(meta, dict) or not isinstance(meta.get("expert_return", 0), (int, float)):
+    # A file without meta loads (from elsewhere, at the env's own rate); expert_return may be null.
+    if not isinstance(meta, dict) or not isinstance(meta.get("expert_return") or 0, (int, float)):
         raise UsageError(f"{path}: its meta is not of the format in README.md: fix or remove it")
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)

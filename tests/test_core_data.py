@@ -268,9 +268,11 @@ def test_a_meta_of_the_wrong_kind_is_refused_before_training(tmp_path, meta):
         load_user_demos(user_demo_file(tmp_path, meta=np.array(meta)))
 
 
-def test_a_meta_with_a_numeric_expert_return_loads(tmp_path):
-    meta = load_demos(bc_oh, demos=user_demo_file(tmp_path, meta=np.array('{"expert_return": 3000}')))[1]
-    assert meta == {"expert_return": 3000}
+@pytest.mark.parametrize("expert_return", [3000, 3000.5, None])  # null: demos made elsewhere, no expert known
+def test_a_meta_with_a_numeric_or_null_expert_return_loads(tmp_path, expert_return):
+    text = json.dumps({"expert_return": expert_return})
+    meta = load_demos(bc_oh, demos=user_demo_file(tmp_path, meta=np.array(text)))[1]
+    assert meta == {"expert_return": expert_return}
 
 
 def test_demos_record_what_a_dataset_format_needs():
