@@ -351,7 +351,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# At import, so spawned workers get them too: gymnasium's errors only, MuJoCo's warnings filtered.
+# At import (spawned workers too): mute gymnasium's warnings (v4 is deprecated); filter MuJoCo's.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 
@@ -370,13 +370,15 @@ def load_demos(args, env: gym.Env) -> tuple:
         path = f"demos/{args.env}_{n}.npz"
     elif path is None:
         path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
+    if not os.path.isfile(path) and args.demos is not None:
+        raise UsageError(f"demo file {path} not found in {os.getcwd()}: check --demos")
     if not os.path.isfile(path):
         make = f"python expert_ppo.py --env {args.env} --frame-skip {args.frame_skip}"
         make += f" --num-demo-samples {n} --make-demos"
-        fix = f"check --demos, or make it: {make}"
-        # Fewer steps at the env's own rate: the first steps of the paper's file will do.
-        if args.demos is None and args.frame_skip == native and n < paper_n:
-            shipped = f"demos/{args.env}_{paper_n}.npz"
+        fix = f"make it: {make}"
+        # Fewer steps at the env's own rate: the first steps of a larger shipped file will do.
+        shipped = f"demos/{args.env}_{paper_n}.npz"
+        if path == f"demos/{args.env}_{n}.npz" and n < paper_n and os.path.isfile(shipped):
             fix += f", or the shipped file's first steps: --demos {shipped} --num-demo-samples {n}"
         raise UsageError(f"demo file {path} not found in {os.getcwd()}: {fix}")
     dtypes = {"observations": np.float64, "actions": np.float32, "episode_starts": bool}
@@ -392,10 +394,10 @@ def load_demos(args, env: gym.Env) -> tuple:
     except Exception as error:
         # The error's type only: numpy's own message may advise allow_pickle, unsafe here.
         message = f"{path} is not a readable demo file ({type(error).__name__})"
-        raise UsageError(f"{message}: see the format in README.md")
+        raise UsageError(f"{message}: see the format in docs/methods.md")
     # A file without meta loads (from elsewhere, at the env's own rate); expert_return may be null.
     if not isinstance(meta, dict) or not isinstance(meta.get("expert_return") or 0, (int, float)):
-        raise UsageError(f"{path}: its meta is not of the format in README.md: fix or remove it")
+        raise UsageError(f"{path}: its meta does not follow docs/methods.md: fix or remove it")
     made_for = meta.get("env_id", args.env)
     made_at = meta.get("frame_skip", native)
     if made_for != args.env:
@@ -405,7 +407,7 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in dtypes:
         if key not in demos:
-            raise UsageError(f"{path} has no {key!r} array: see the format in README.md")
+            raise UsageError(f"{path} has no {key!r} array: see the format in docs/methods.md")
     obs = demos["observations"]
     actions = demos["actions"]
     starts = demos["episode_starts"]

@@ -39,7 +39,7 @@ from benchmark.results import OneLineParser, UsageError, run_cli, written_atomic
 # The paper's v4 envs are used on purpose: hide gymnasium's warning that they are out of date.
 warnings.filterwarnings("ignore", ".*is out of date", DeprecationWarning)
 KNOWN_ENVS = re.compile(r"(Hopper|HalfCheetah|Walker2d|Ant)-v[45]")
-FORMAT_FIX = "see the .npz format in README.md"
+FORMAT_FIX = "see the .npz format in docs/methods.md"
 DTYPES = {
     "observations": np.float64,
     "actions": np.float32,

@@ -250,13 +250,13 @@ def test_a_non_finite_demo_value_is_refused_with_its_row(tmp_path, key, row, col
 
 
 def test_a_missing_demo_array_is_named(tmp_path):
-    with pytest.raises(bc_oh.UsageError, match=r"user.npz has no 'episode_starts' array: see the format in README.md$"):
+    with pytest.raises(bc_oh.UsageError, match=r"user.npz has no 'episode_starts' array: see the format in docs/methods.md$"):
         load_user_demos(user_demo_file(tmp_path, drop="episode_starts"))
 
 
 def test_demos_of_text_are_refused(tmp_path):
     """Text does not convert to numbers: the conversion's error is refused in one line."""
-    with pytest.raises(bc_oh.UsageError, match=r"user.npz is not a readable demo file \(ValueError\): see the format in README.md$"):
+    with pytest.raises(bc_oh.UsageError, match=r"user.npz is not a readable demo file \(ValueError\): see the format in docs/methods.md$"):
         load_user_demos(user_demo_file(tmp_path, actions=np.full((200, 3), "a")))
 
 
@@ -264,7 +264,7 @@ def test_demos_of_text_are_refused(tmp_path):
 # printed after training, so a text there raised at the very end.
 @pytest.mark.parametrize("meta", ["[1, 2]", '"Hopper-v4"', '{"env_id": "Hopper-v4", "expert_return": "3000"}'])
 def test_a_meta_of_the_wrong_kind_is_refused_before_training(tmp_path, meta):
-    with pytest.raises(bc_oh.UsageError, match=r"user.npz: its meta is not of the format in README.md: fix or remove it$"):
+    with pytest.raises(bc_oh.UsageError, match=r"user.npz: its meta does not follow docs/methods.md: fix or remove it$"):
         load_user_demos(user_demo_file(tmp_path, meta=np.array(meta)))
 
 

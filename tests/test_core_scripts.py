@@ -102,7 +102,7 @@ BAD_INPUTS = {
     # NaN passes a `<= 0` check, and an infinite rate or noise trains on NaN: both are refused.
     "nan learning rate": (["--learning-rate", "nan"], "--learning-rate must be positive and finite, got nan"),
     "infinite noise": (["--obs-noise-std", "inf"], "--obs-noise-std must be >= 0 and finite, got inf"),
-    "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: check --demos, or make it: "
+    "no demos": ([], "demo file demos/Hopper-v4_20000.npz not found in {cwd}: make it: "
                      "python expert_ppo.py --env Hopper-v4 --frame-skip 4 --num-demo-samples 20000 --make-demos"),
     "missing demos": (["--demos", "missing.npz"], "demo file missing.npz not found in {cwd}: check --demos"),
     "corrupt demos": (["--demos", "corrupt.npz"], "corrupt.npz is not a readable demo file ("),

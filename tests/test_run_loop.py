@@ -166,11 +166,17 @@ def test_a_demo_file_that_does_not_fit_is_told_what_is_wrong(tmp_path, case, mes
 
 
 def test_missing_demos_of_fewer_steps_name_the_shipped_file_too(tmp_path, monkeypatch):
-    """At the env's own rate, fewer steps than the paper's: the first steps of the shipped file will do."""
+    """At the env's own rate, fewer steps than the paper's: the first steps of the shipped file will do, when it is
+    there (only v4 files ship: Hopper-v5's hint named a file that did not exist)."""
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "demos").mkdir()
+    (tmp_path / "demos" / "Hopper-v4_20000.npz").symlink_to(REPO_ROOT / "demos" / "Hopper-v4_20000.npz")
     assert_usage_error(run_in_process("bc_oh.py", "--num-demo-samples", 500),
                        "--num-demo-samples 500 --make-demos, or the shipped file's first steps: "
                        "--demos demos/Hopper-v4_20000.npz --num-demo-samples 500")
+    result = run_in_process("bc_oh.py", "--env", "Hopper-v5", "--num-demo-samples", 500)
+    assert_usage_error(result, "python expert_ppo.py --env Hopper-v5 --frame-skip 4 --num-demo-samples 500 --make-demos")
+    assert result.stderr.strip().endswith("--make-demos"), "no shipped file to name"
 
 
 def test_the_progress_lines_say_what_their_numbers_are(tmp_path, monkeypatch, capsys):
@@ -191,8 +197,11 @@ def test_the_progress_lines_say_what_their_numbers_are(tmp_path, monkeypatch, ca
 def test_missing_demos_name_the_command_that_makes_them(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert_usage_error(run_in_process("bc_oh.py", "--frame-skip", 1, "--num-demo-samples", 500),
-                       f"demo file demos/Hopper-v4_fs1_500.npz not found in {tmp_path}: check --demos, or make it: "
+                       f"demo file demos/Hopper-v4_fs1_500.npz not found in {tmp_path}: make it: "
                        "python expert_ppo.py --env Hopper-v4 --frame-skip 1 --num-demo-samples 500 --make-demos")
     assert_usage_error(run_in_process("bc_oh.py", "--env", "Walker2d-v5"),
-                       f"demos/Walker2d-v5_10000.npz not found in {tmp_path}: check --demos, or make it: "
+                       f"demos/Walker2d-v5_10000.npz not found in {tmp_path}: make it: "
                        "python expert_ppo.py --env Walker2d-v5 --frame-skip 4 --num-demo-samples 10000 --make-demos")
+    # A path the user gave: expert_ppo.py would not write it, so no command is named.
+    result = run_in_process("bc_oh.py", "--demos", "mine.npz")
+    assert result.stderr.strip() == f"error: demo file mine.npz not found in {tmp_path}: check --demos"

@@ -37,7 +37,7 @@ CASES = {
     "another version's demos": (["--env", "Hopper-v5", "--demos", "v4.npz"], "v4.npz holds demos of Hopper-v4: pass --env Hopper-v4"),
     "actions out of bounds": (["--demos", "scaled.npz"], "scaled.npz: actions of rows [0"),  # the first offending row first
     "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False: it is True on each episode's start"),
-    "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError): see the format in README.md"),
+    "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError): see the format in docs/methods.md"),
     "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "v4.npz holds 200 steps: pass --num-demo-samples 200 or fewer"),
     "a batch or fewer steps": (["--demos", "v4.npz", "--batch-size", 200], "v4.npz: 200 steps, not more than a batch: use a smaller --batch-size"),
 }
@@ -69,7 +69,7 @@ def test_a_users_unreadable_file_gets_no_advice_to_delete_or_unpickle_it(tmp_pat
     monkeypatch.chdir(tmp_path)
     (tmp_path / "mine.npz").write_bytes(b"not a zip")
     result = run_in_process("bc_oh.py", "--demos", "mine.npz", "--epochs", 1, "--seeds", 1)
-    assert_usage_error(result, "mine.npz is not a readable demo file (ValueError): see the format in README.md")
+    assert_usage_error(result, "mine.npz is not a readable demo file (ValueError): see the format in docs/methods.md")
     assert "delete" not in result.stderr and "allow_pickle" not in result.stderr
 
 
