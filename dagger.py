@@ -530,8 +530,8 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it was made for env_id."""
     if not os.path.isfile(path):
-        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-        raise UsageError(f"expert checkpoint {path} not found: {train}")
+        train = f"python expert_ppo.py --env {env_id} writes runs/expert_ppo/{env_id}__1/best.pt"
+        raise UsageError(f"expert checkpoint {path} not found: give its path ({train})")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy = ExpertPolicy(checkpoint)

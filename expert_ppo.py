@@ -1,5 +1,5 @@
 # PPO expert that makes the demonstrations (paper section 8.3, "Data Collection"); see README.md
-"""Proximal Policy Optimisation for gymnasium 1.x MuJoCo envs, CleanRL style, in one file.
+"""Proximal Policy Optimisation for gymnasium (>= 1.1) MuJoCo envs, CleanRL style, in one file.
 
 Train:    python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000
 Resume:   python expert_ppo.py --env Hopper-v4 --total-timesteps 3000000 --resume
@@ -81,7 +81,7 @@ class Args:
     ship_to: str | None = None
     """with --eval-only: also write the checkpoint, with its evaluated return, to this path"""
     make_demos: bool = False
-    """roll --checkpoint out into ./demos/<env>[_fs<K>]_<N>.npz (kept if made already)"""
+    """roll --checkpoint out into ./demos/<env>[_fs<K>]_<N>.npz (kept if this expert made it)"""
     num_demo_samples: int | None = None
     """with --make-demos: demo steps; None: 20000 for Hopper, 10000 otherwise (section 8.3)"""
     retarget: bool = False
@@ -152,7 +152,7 @@ def validate(args: Args):
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
         require(0 < value < np.inf, f"{flag} must be positive and finite, got {value}")
-    # No entropy bonus and no time limit are 0; a NaN or negative weight trains a wrong expert.
+    # 0 is allowed here (no entropy bonus, no time limit); NaN or a negative value is refused.
     for name in ["ent_coef", "vf_coef", "max_minutes"]:
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
@@ -268,7 +268,7 @@ def train(args: Args):
 
     # A resumed run gets fresh episodes and torch's seed again: not an unbroken run's digits.
     raw_obs, _ = envs.reset(seed=args.seed + global_step)
-    # Each env's discounted return, to scale rewards as NormalizeReward does, but reset at any end.
+    # Each env's discounted return, whose running std scales the rewards; zeroed after any end.
     discounted_return = np.zeros(args.num_envs)
     episode_return = np.zeros(args.num_envs)
     recent_returns = []
@@ -281,7 +281,7 @@ def train(args: Args):
         frac = 1.0 - global_step / args.total_timesteps
         optimizer.param_groups[0]["lr"] = args.learning_rate * frac
 
-        # ---- Rollout (it and the advantage estimation below need no gradients)
+        # ---- Rollout and GAE, no gradients; the env gets clipped actions, the buffer the sampled
         with torch.no_grad():
             for step in range(args.num_steps):
                 obs_rms.update(raw_obs)
@@ -348,7 +348,7 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
 
-        # ---- Progress, evaluation (building ExpertPolicy advances torch's RNG), checkpoints
+        # ---- Progress, evaluation, checkpoints (ExpertPolicy's init draws on torch's RNG too)
         elapsed = time.time() - start_time
         sps = (global_step - start_step) / max(elapsed, 1e-6)
         recent = f"{np.mean(recent_returns):.0f}" if recent_returns else "n/a"
@@ -415,8 +415,8 @@ class ExpertPolicy(nn.Module):
 def load_expert(path: str, env_id: str) -> ExpertPolicy:
     """Load an expert checkpoint written by expert_ppo.py, checking that it was made for env_id."""
     if not os.path.isfile(path):
-        train = f"train one (python expert_ppo.py --env {env_id}), or give its path"
-        raise UsageError(f"expert checkpoint {path} not found: {train}")
+        train = f"python expert_ppo.py --env {env_id} writes runs/expert_ppo/{env_id}__1/best.pt"
+        raise UsageError(f"expert checkpoint {path} not found: give its path ({train})")
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         policy = ExpertPolicy(checkpoint)
@@ -674,7 +674,7 @@ def make_demos(args: Args):
     if isinstance(made, dict) and all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    # A checkpoint never evaluated to the end (a stopped run's latest.pt): no return, nor its rate.
+    # No evaluated return (e.g. a mid-run latest.pt): drop it and the rate it was measured at.
     if meta["expert_return"] is None:
         del meta["expert_return"]
         del meta["expert_frame_skip"]

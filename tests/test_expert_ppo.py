@@ -402,7 +402,9 @@ def test_make_demos_keeps_a_file_of_the_same_expert_and_remakes_one_of_another(d
     (["--num-demo-samples", 1], "--num-demo-samples must be more than 1, got 1"),
     (["--num-demo-samples", -3], "--num-demo-samples must be more than 1, got -3"),
     (["--num-demo-samples", 0], "--num-demo-samples must be more than 1, got 0"),
-    (["--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found"),
+    # Training writes runs/expert_ppo/..., not the default experts/<env>.pt: the message names where.
+    (["--checkpoint", "missing.pt"], "expert checkpoint missing.pt not found: give its path "
+                                     "(python expert_ppo.py --env Hopper-v4 writes runs/expert_ppo/Hopper-v4__1/best.pt)"),
     (["--checkpoint", "my{x}.pt"], "expert checkpoint my{x}.pt not found"),
     (["--env", "Walker2d-v4", "--checkpoint", SHIPPED_EXPERT], "is an expert for Hopper-v4, not Walker2d-v4"),
 ], ids=["one-sample", "negative-samples", "zero-samples", "missing-checkpoint", "braces-in-checkpoint", "other-env-checkpoint"])
