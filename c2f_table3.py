@@ -5,7 +5,7 @@ capacity control. At its defaults this file is c2f.py: the same model, weights a
     --fusion              where sg(zeta) joins the policy model: late, into the last layer (c2f.py's
                           reading of the paper); Table 3's middle, into pi_theta's second layer, and
                           early, beside the input frames; output and penultimate, two other readings
-                          (section 8.3: "to the output of policy model"; 8.2: "penultimate FC")
+                          (section 8.3: "to the output of policy model"; 5.1, 8.2: "penultimate FC")
     --coarse-output       feature: the coarse model's last hidden feature ("ResNet output as zeta")
     --coarse-input        history: the coarse model reads the whole history ("BC-OH as pi_phi,
                           BC-OH as pi_theta"; with --policy-input current, "..., BC-SO as pi_theta")
@@ -37,7 +37,7 @@ import torch.nn.functional as F
 import tyro
 
 METHOD = "c2f_table3"
-LOSS = "Eq. 2; --two-stage: zeta's MSE, then the final action's; --no-coarse-action: the final's"
+LOSS = "MSE(zeta) + MSE(final), Eq. 2 summed; --two-stage: each in turn; --no-coarse-action: final"
 
 
 @dataclass
@@ -83,7 +83,7 @@ class Args:
     cuda: bool = False
     """train on the GPU"""
     fusion: Literal["late", "output", "middle", "early", "penultimate"] = "late"
-    """where sg(zeta) joins pi_theta: late (c2f.py's reading); the others: this file's docstring"""
+    """where zeta joins pi_theta: late (c2f.py's), middle (layer 2), early (input); see file top"""
     coarse_output: Literal["action", "feature"] = "action"
     """what the coarse model passes on: its action zeta (the paper's) or its last hidden feature"""
     coarse_input: Literal["current", "history"] = "current"
@@ -93,7 +93,7 @@ class Args:
     stop_gradient: bool = True
     """stop the final loss's gradient at zeta (the paper's); no: it trains the coarse model too"""
     coarse_action: bool = True
-    """feed sg(zeta) to the policy model; no: zeros and no coarse loss (a capacity control)"""
+    """feed sg(zeta) to pi_theta; no: zeros, no coarse loss, coarse MLP idle (a capacity control)"""
     two_stage: bool = False
     """train the coarse model alone for --epochs and freeze it, then the rest for --epochs"""
 
