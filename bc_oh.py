@@ -350,7 +350,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_for != args.env:
         raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
     if made_at != args.frame_skip:
-        rates = f"frame skip {made_at}, not {args.frame_skip}"
+        rates = f"frame skip {made_at} (the env's own if its meta has none), not {args.frame_skip}"
         raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in dtypes:
         if key not in demos:

@@ -105,6 +105,9 @@ class Args:
         if not self.stop_gradient and (self.two_stage or not self.coarse_action):
             moot = "--no-stop-gradient changes nothing with --two-stage or --no-coarse-action"
             raise UsageError(f"{moot}: leave it out")
+        if self.coarse_input == "history" and not self.coarse_action:
+            idle = "--coarse-input history feeds a coarse model that --no-coarse-action leaves idle"
+            raise UsageError(f"{idle}: pass one of them")
 
 
 # ---- The method: C2F's networks, loss and training loop, with Table 3's ablations ----
@@ -476,7 +479,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     if made_for != args.env:
         raise UsageError(f"{path} holds demos of {made_for}: pass --env {made_for}")
     if made_at != args.frame_skip:
-        rates = f"frame skip {made_at}, not {args.frame_skip}"
+        rates = f"frame skip {made_at} (the env's own if its meta has none), not {args.frame_skip}"
         raise UsageError(f"{path} was made at {rates}: pass --frame-skip {made_at}")
     for key in dtypes:
         if key not in demos:

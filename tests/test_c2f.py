@@ -352,6 +352,18 @@ def test_no_stop_gradient_is_refused_where_it_would_change_nothing(tmp_path, oth
         tiny_args(c2f_table3, stop_gradient=False, two_stage=other == "--two-stage", coarse_action=other != "--no-coarse-action")
 
 
+def test_a_history_input_to_an_idle_coarse_model_is_refused(tmp_path):
+    """With --no-coarse-action the coarse model is never used: --coarse-input history would change only its random
+    initial weights (and so the draws of the layers after it), a run that looks like an ablation and is not one."""
+    tiny = ["--seeds", "1", "--epochs", "1", "--eval-episodes", "1", "--output-dir", tmp_path / "out"]
+    result = run_in_process("c2f_table3.py", "--coarse-input", "history", "--no-coarse-action", *tiny)
+    assert_usage_error(result, "--coarse-input history feeds a coarse model that --no-coarse-action leaves idle: pass one of them")
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(c2f_table3.UsageError, match="leaves idle"):
+        tiny_args(c2f_table3, coarse_input="history", coarse_action=False)
+    assert tiny_args(c2f_table3, coarse_input="history").coarse_action
+
+
 # ----------------------------------------------------------------------------------------------
 # c2f_table3.py: the capacity controls, --no-coarse-action and --fusion penultimate
 

@@ -164,7 +164,7 @@ def test_a_file_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
     with np.load("demos/Hopper-v4_fs1_120.npz") as saved:
         fast = saved["observations"]
     (tmp_path / "demos" / "Hopper-v4_fs1_120.npz").rename(tmp_path / "demos" / "Hopper-v4_120.npz")
-    with pytest.raises(bc_oh.UsageError, match=r"^demos/Hopper-v4_120.npz was made at frame skip 1, not 4: pass --frame-skip 1$"):
+    with pytest.raises(bc_oh.UsageError, match=r"^demos/Hopper-v4_120.npz was made at frame skip 1 \(the env's own if its meta has none\), not 4: pass --frame-skip 1$"):
         load_demos(bc_oh, num_demo_samples=120)
     again = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 120)
     assert again.returncode == 0 and again.stdout.splitlines()[-1] == "wrote demos/Hopper-v4_120.npz", again.stderr
@@ -192,7 +192,7 @@ def test_demos_of_another_rate_are_refused(tmp_path, monkeypatch):
     assert made.returncode == 0, made.stderr
     assert made.stdout.splitlines()[-1].startswith("Hopper-v4 bc_oh: "), made.stdout
     result = run_in_process("bc_oh.py", "--demos", tmp_path / "demos" / "Hopper-v4_fs1_120.npz", "--epochs", 1)
-    assert_usage_error(result, "Hopper-v4_fs1_120.npz was made at frame skip 1, not 4: pass --frame-skip 1")
+    assert_usage_error(result, "Hopper-v4_fs1_120.npz was made at frame skip 1 (the env's own if its meta has none), not 4: pass --frame-skip 1")
     summary = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert (summary["args"]["frame_skip"], summary["args"]["hide_velocities"]) == (1, False)
 
@@ -271,4 +271,4 @@ def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(t
     np.savez(path, observations=rng.normal(size=(200, 11)), actions=rng.uniform(-1, 1, (200, 3)).astype(np.float32),
              episode_starts=np.arange(200) % 50 == 0)
     assert_usage_error(run_in_process("bc_oh.py", "--demos", path, "--frame-skip", 1, "--epochs", 1),
-                       "user.npz was made at frame skip 4, not 1: pass --frame-skip 4")
+                       "user.npz was made at frame skip 4 (the env's own if its meta has none), not 1: pass --frame-skip 4")

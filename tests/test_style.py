@@ -56,7 +56,7 @@ CEILINGS = {
     "keyframe": 626,
     "average_ensemble": 609,
     "dagger": 685,
-    "c2f_table3": 655,
+    "c2f_table3": 658,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
