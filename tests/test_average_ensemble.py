@@ -1,7 +1,6 @@
 """average_ensemble.py: the ensemble acts with the exact mean of a BC-SO and a BC-OH member, the BC-SO
 member reads only the current frame, each member is trained exactly as its own script trains it, and a
 tiny run reports the ensemble and both members."""
-import json
 import re
 
 import numpy as np
@@ -10,7 +9,7 @@ import torch
 import average_ensemble
 import bc_oh
 import bc_so
-from conftest import SMOKE_ARGS, fake_demos, link_experts, run_script, skip_evaluation, tiny_args
+from conftest import fake_demos, skip_evaluation, smoke_run, table_row, tiny_args
 
 OBS_DIM, ACT_DIM, HISTORY = 11, 3, 3
 
@@ -71,24 +70,15 @@ def test_members_train_exactly_as_bc_so_and_bc_oh(monkeypatch):
 
 
 def test_tiny_run_reports_the_ensemble_and_both_members(tmp_path):
-    link_experts(tmp_path)
-    result = run_script("average_ensemble.py", *SMOKE_ARGS, "--output-dir", "out", cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    lines = result.stdout.strip().splitlines()
-    summary = re.fullmatch(r"Hopper-v4 average_ensemble: score (-?[\d.]+) ± ([\d.]+) \(mean ± std over 1 seed\), \d+% of the expert's 3305", lines[-1])
-    assert summary, lines[-1]
-    row = next(line for line in lines if re.match(r"\s+1 \|", line))
-    ensemble_score, so_score, oh_score = map(float, row.split("|")[1:])
-    data = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
-    assert data["method"] == "average_ensemble"
+    stdout, data = smoke_run("average_ensemble.py", tmp_path)  # the ensemble's summary, table column and JSON agree
     assert (data["args"]["frame_skip"], data["args"]["output_dir"]) == (4, "out"), "the resolved rate, a relative folder"
     seed = data["scores"]["1"]
-    assert round(seed["score"], 1) == ensemble_score == float(summary.group(1))
-    assert np.isclose(seed["score"], np.mean([ret for _, ret in seed["evaluations"][-3:]]))
+    ensemble_score, so_score, oh_score = map(float, table_row(stdout, 1))
+    assert round(seed["score"], 1) == ensemble_score
     for name, score in (("bc_so", so_score), ("bc_oh", oh_score)):
         member = seed["members"][name]
         assert [epoch for epoch, _ in member["evaluations"]] == [epoch for epoch, _ in seed["evaluations"]] == [1, 2]
         assert round(member["score"], 1) == score
         assert np.isclose(member["score"], np.mean([ret for _, ret in member["evaluations"][-3:]]))
         assert data["members"][name]["mean"] == member["score"]
-    assert re.search(r"^members: bc_so -?[\d.]+ ± [\d.]+, bc_oh -?[\d.]+ ± [\d.]+$", result.stdout, re.M)
+    assert re.search(r"^members: bc_so -?[\d.]+ ± [\d.]+, bc_oh -?[\d.]+ ± [\d.]+$", stdout, re.M)

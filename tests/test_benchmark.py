@@ -10,10 +10,9 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error
+from conftest import REPO_ROOT, assert_usage_error, plant, run_module
 
 from benchmark import aggregate, run_grid
-from benchmark.paper import paper_settings
 from benchmark.results import ResultError, UsageError, make_result, read_result, result_path
 
 DEMO_FILE = '''
@@ -110,16 +109,6 @@ def demos_made(scripts) -> list:
     """The flags of each `expert_ppo.py --make-demos` the grid ran, in order."""
     path = scripts / "made.txt"
     return path.read_text().splitlines() if path.exists() else []
-
-
-def plant(results, method, env, seed, returns, **settings):
-    """Write a valid result of `method` on `env` for `seed` whose evaluations return `returns`."""
-    args = {"env": env, "seeds": [seed], **paper_settings(env), "learning_rate": None, **settings}
-    result = make_result(env, method, args, {seed: [[epoch, value] for epoch, value in enumerate(returns, 1)]})
-    path = result_path(results, method, env, [seed])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result))
-    return path
 
 
 # ----------------------------------------------------------------------------------------------
@@ -315,8 +304,7 @@ def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
     (["--methods", "bc_oh"], "the following arguments are required: --envs"),
 ])
 def test_bad_grid_input_is_one_line(args, expected, tmp_path):
-    result = subprocess.run([sys.executable, "-m", "benchmark.run_grid", "--results-dir", str(tmp_path), *args],
-                            cwd=REPO_ROOT, capture_output=True, text=True, env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    result = run_module("benchmark.run_grid", "--results-dir", tmp_path, *args)
     assert_usage_error(result, expected)
     assert result.returncode == 2 and not list(tmp_path.iterdir())
 
@@ -450,8 +438,7 @@ def test_docs_results_md_holds_the_committed_table2():
 
 def test_aggregator_without_valid_results_is_one_line(tmp_path):
     plant(tmp_path, "bc_oh", "Hopper-v4", 1, [1.0], epochs=3)
-    result = subprocess.run([sys.executable, "-m", "benchmark.aggregate", "--results-dir", str(tmp_path), "--out", str(tmp_path / "out")],
-                            cwd=REPO_ROOT, capture_output=True, text=True)
+    result = run_module("benchmark.aggregate", "--results-dir", tmp_path, "--out", tmp_path / "out")
     assert result.returncode == 2 and "Traceback" not in result.stderr
     lines = result.stderr.splitlines()
     assert "not the paper's settings (epochs 3 != 1000)" in lines[0] and lines[1].startswith("error: no valid results to aggregate")

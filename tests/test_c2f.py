@@ -264,10 +264,15 @@ def test_each_ablation_changes_only_the_layers_it_names(flags, changed):
 def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():
     policy = model(fusion="output")
     obs_history, _ = batch()
-    zeta, _, _, seen = capture_inputs(policy, ["head"], obs_history)
+    zeta, _, final, seen = capture_inputs(policy, ["head"], obs_history)
     assert [type(layer) for layer in policy.policy_rest] == [torch.nn.Linear, torch.nn.ReLU, torch.nn.Linear], "no last ReLU"
     assert policy.policy_rest[-1].out_features == ACT and policy.head.in_features == 2 * ACT
     assert torch.equal(seen["head"][:, -ACT:], zeta)
+    # the last layer sees exactly [the policy MLP's action-sized output, sg(zeta)], and gives the final action
+    policy_output = policy.policy_rest(policy.policy_first(policy.normalize(obs_history)))
+    assert torch.equal(seen["head"], torch.cat([policy_output, zeta], dim=1))
+    assert zeta.shape == final.shape == (len(obs_history), ACT)
+    assert torch.allclose(final, policy.head(torch.cat([policy_output, zeta], dim=1)))
 
 
 @pytest.mark.parametrize("stop_gradient", [True, False])

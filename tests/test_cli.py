@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from conftest import REPO_ROOT, run_in_process
+from conftest import METHOD_FILES, REPO_ROOT, run_in_process
 
 SCRIPTS = sorted(path.name for path in REPO_ROOT.glob("*.py"))
 
@@ -43,10 +43,6 @@ def test_help_still_prints_and_exits_0(script):
     result = run_in_process(script, "--help")
     assert result.returncode == 0 and result.stderr == ""
     assert "--env STR" in result.stdout
-
-
-METHOD_FILES = ["bc_oh.py", "bc_so.py", "c2f.py", "c2f_table3.py", "fca.py", "keyframe.py", "history_dropout.py",
-                "average_ensemble.py", "dagger.py"]
 
 
 @pytest.mark.parametrize("script", METHOD_FILES)

@@ -292,7 +292,7 @@ def with_nan_at_row_17(tmp_path):
 BAD_DEMOS = {
     "not found": (lambda tmp: tmp / "nowhere.npz", "nowhere.npz not found in "),
     "another rate": (lambda tmp: make_demos("Hopper-v4", 300, 1),
-                     "was made at frame skip 1, not 4, the models' rate: pass --demos made at frame skip 4"),
+                     "was made at frame skip 1 (the env's own if its meta has none), not 4, the models' rate: pass --demos made at frame skip 4"),
     "a non-finite value": (with_nan_at_row_17, "observations hold non-finite values at rows [17]: fix them"),
 }
 

@@ -14,7 +14,7 @@ import torch
 
 import bc_oh
 import expert_ppo
-from conftest import REPO_ROOT, link_experts, load_demos, make_demos, run_in_process, tiny_args
+from conftest import REPO_ROOT, demo_file, link_experts, load_demos, make_demos, run_in_process, tiny_args
 
 HOPPER_VELOCITIES = list(range(5, 11))
 POSITIONS = list(range(0, 5))
@@ -141,16 +141,10 @@ def test_demo_generation_is_deterministic():
     assert first["episode_starts"][0] and np.abs(first["actions"]).max() <= 1.0
 
 
-def saved(path) -> tuple:
-    """(arrays, meta) of a demo file."""
-    with np.load(path, allow_pickle=False) as data:
-        return {key: data[key] for key in data.files if key != "meta"}, json.loads(str(data["meta"]))
-
-
 def test_the_made_demo_file_loads_as_it_was_written(tmp_path, monkeypatch):
     """load_demos finds the file `expert_ppo.py --make-demos` wrote under the name it looks for, and returns its arrays
     and meta unchanged; the same file through --demos loads the same."""
-    arrays, meta = saved(make_demos("Hopper-v4", 120))
+    arrays, meta = demo_file(make_demos("Hopper-v4", 120))
     monkeypatch.chdir(link_experts(tmp_path))
     demos, loaded_meta = load_demos(bc_oh, num_demo_samples=120)
     for key in ("observations", "actions", "episode_starts"):
@@ -176,7 +170,7 @@ def test_demos_follow_their_expert(tmp_path, monkeypatch):
     shutil.copy(REPO_ROOT / "experts" / "Hopper-v4.pt", tmp_path / "expert.pt")
     path = tmp_path / "demos" / "Hopper-v4_120.npz"
     assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
-    first, meta = saved(path)
+    first, meta = demo_file(path)
     assert meta["expert_sha256"] == hashlib.sha256((tmp_path / "expert.pt").read_bytes()).hexdigest()
     stamp = path.stat().st_mtime_ns
     assert make_demos_here() == "demos/Hopper-v4_120.npz: already made from expert.pt with these settings"
@@ -186,13 +180,13 @@ def test_demos_follow_their_expert(tmp_path, monkeypatch):
     checkpoint["actor"] = {key: value + 0.05 for key, value in checkpoint["actor"].items()}
     torch.save(checkpoint, "expert.pt")
     assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
-    retrained, meta = saved(path)
+    retrained, meta = demo_file(path)
     assert meta["expert_sha256"] == hashlib.sha256((tmp_path / "expert.pt").read_bytes()).hexdigest()
     assert not np.array_equal(retrained["actions"], first["actions"]), "the old expert's demos were kept"
 
     np.savez(path, **{**retrained, "meta": np.array("[1, 2]")})  # a meta not of our format: rolled out again
     assert make_demos_here() == "wrote demos/Hopper-v4_120.npz"
-    assert saved(path)[1]["expert_sha256"] == meta["expert_sha256"]
+    assert demo_file(path)[1]["expert_sha256"] == meta["expert_sha256"]
 
     os.remove("expert.pt")  # demos copied without their expert: loaded as they are
     assert np.array_equal(load_demos(bc_oh, num_demo_samples=120)[0]["actions"], retrained["actions"])

@@ -3,8 +3,7 @@ and the per-regime curves of benchmark/regime_summary.py."""
 from pathlib import Path
 
 import pytest
-from test_benchmark import plant
-from test_regime_summary import plant_expert, regime_map, summarise  # noqa: F401 (regime_map is a fixture)
+from conftest import plant, plant_expert, summarise
 
 from benchmark import aggregate
 from benchmark.aggregate import Curve, Record
@@ -68,7 +67,7 @@ def test_without_curves_nothing_is_drawn_or_linked(tmp_path):
     assert page.read_text().endswith("\n\n![Table 2](results/table2.png)\n<!-- /table2 -->\n")
 
 
-def test_the_regime_summary_writes_curves_per_regime(regime_map, capsys):  # noqa: F811 (the fixture)
+def test_the_regime_summary_writes_curves_per_regime(regime_map, capsys):
     results, experts, _ = regime_map
     assert summarise(results, experts) == 0
     for regime in ("native_noise", "fs1_noise"):

@@ -1,15 +1,14 @@
 """benchmark/ensemble_twins.py, the Average-Ensemble's control: two members of one kind from different seeds."""
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import torch
-from conftest import REPO_ROOT, fake_demos
+from conftest import fake_demos, run_module
 
 import average_ensemble
 from benchmark import ensemble_twins
+from benchmark.machine import machine
 
 
 @pytest.mark.parametrize("kind", ["bc_so", "bc_oh"])
@@ -30,14 +29,12 @@ def test_the_first_member_starts_as_the_ensembles_member_of_its_kind_and_its_twi
 def test_two_workers_train_the_twins_and_each_result_records_its_machine(tmp_path):
     np.savez(tmp_path / "d.npz", **fake_demos(256))
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "benchmark.ensemble_twins", "--member", "bc_oh", "--demos", str(tmp_path / "d.npz"),
-               "--seeds", "1", "2", "--workers", "2", "--epochs", "2", "--eval-every", "1", "--eval-episodes", "1",
-               "--hidden", "16", "--output-dir", str(out)]
-    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    done = run_module("benchmark.ensemble_twins", "--member", "bc_oh", "--demos", tmp_path / "d.npz", "--seeds", 1, 2, "--workers", 2,
+                      "--epochs", 2, "--eval-every", 1, "--eval-episodes", 1, "--hidden", 16, "--output-dir", out)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-1].startswith("Hopper-v4 ensemble_twins: ")
     for seed in (1, 2):
         result = json.loads((out / f"result_seeds{seed}.json").read_text())
         assert result["method"] == "ensemble_twins" and result["args"]["member"] == "bc_oh"
         assert list(result["scores"][str(seed)]["members"]) == ["bc_oh", "bc_oh_twin"]  # trained in a spawned worker
-        assert result["machine"]["cpu_vendor"] and "libc" in result["machine"]
+        assert result["machine"] == machine(), "the worker's machine record: the same CPU, versions and (inherited) environment"

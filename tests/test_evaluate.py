@@ -12,11 +12,12 @@ import torch
 from PIL import Image
 
 import watch
-from conftest import REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
+from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
 
 BUDGET = ("--env", "Hopper-v4", "--seeds", 1, "--epochs", 2, "--eval-every", 1, "--eval-episodes", 2, "--num-demo-samples", 1000, "--save-model")
 EXTRA = {"dagger": ("--dagger-samples", 100, "--dagger-rounds", 2, "--dagger-epochs", 2)}
-METHODS = ["bc_so", "bc_oh", "c2f", "fca", "keyframe", "history_dropout", "average_ensemble", "dagger"]
+METHODS = [file.removesuffix(".py") for file in METHOD_FILES if file != "c2f_table3.py"]
+"""the methods whose saved models are replayed: c2f_table3 at its defaults is c2f (test_c2f), so c2f stands for it"""
 LAST_SEED = {method: 10_000 * 1 + 2 for method in METHODS}  # fit evaluates epoch E of training seed S with seed 10000 * S + E
 LAST_SEED["dagger"] = 10_000 * 1 + (2 + 2 * 2) + 2 * 2  # its final learner (epoch 2 + rounds * epochs) thrice, the third E=2 episodes on
 RETURN = re.compile(r"^episode (\d+) \| seed (\d+) \| return (\S+)$", re.M)

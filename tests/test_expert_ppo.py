@@ -1,7 +1,6 @@
 """Tests of expert_ppo.py: a tiny training run, its checkpoint, resuming, evaluation, --make-demos and bad input."""
 import contextlib
 import hashlib
-import json
 import re
 import shutil
 
@@ -11,7 +10,7 @@ import pytest
 import torch
 
 import expert_ppo
-from conftest import REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
+from conftest import REPO_ROOT, assert_usage_error, demo_file, link_experts, run_in_process, run_script
 
 TINY = ["--num-envs", 2, "--num-steps", 512, "--num-minibatches", 4, "--update-epochs", 1, "--eval-every-steps", 2048,
         "--save-every-steps", 2048, "--train-eval-episodes", 1, "--eval-episodes", 1]
@@ -105,8 +104,6 @@ def test_resume_continues_from_the_checkpoint(tiny_run, tmp_path):
 
 
 def test_shipped_expert_scores_well():
-    if not SHIPPED_EXPERT.is_file():
-        pytest.skip(f"{SHIPPED_EXPERT} not there")
     mean, episodes = summary(run_script("expert_ppo.py", "--eval-only", "--checkpoint", SHIPPED_EXPERT, "--eval-episodes", 2))
     assert episodes == 2 and mean > 1000  # a random policy scores about 20
     # the score depends on the saved normalisation statistics: without them the actor is much worse
@@ -252,20 +249,6 @@ def test_frame_skip_1_trains_and_evaluates_at_that_rate(fs1_run):
     assert state["global_step"] == 1024
 
 
-def test_frame_skip_1_scales_rewards_by_a_quarter():
-    env = expert_ppo.make_env("Hopper-v4", 1)
-    raw = gym.make("Hopper-v4")
-    raw.unwrapped.frame_skip = 1  # the same dynamics, rewards not rescaled
-    (obs, _), (raw_obs, _) = env.reset(seed=3), raw.reset(seed=3)
-    np.testing.assert_array_equal(obs, raw_obs)
-    for action in np.random.default_rng(0).uniform(-1, 1, (5, 3)):
-        obs, reward, *_ = env.step(action)
-        raw_obs, raw_reward, *_ = raw.step(action)
-        np.testing.assert_array_equal(obs, raw_obs)
-        assert reward == pytest.approx(raw_reward / 4, rel=1e-12)
-    assert expert_ppo.make_env("Hopper-v4", 4).spec.max_episode_steps == 1000  # the native rate is the plain env
-
-
 def test_eval_only_uses_the_recorded_frame_skip(fs1_run, capsys):
     # the final evaluation of training and --eval-only both use seeds 10000, ...: same rate, same return
     run_dir, _, state = fs1_run
@@ -327,11 +310,6 @@ def make_demos_in(folder, capsys, **settings) -> str:
     with contextlib.chdir(folder):
         expert_ppo.make_demos(expert_ppo.Args(env="Hopper-v4", make_demos=True, **settings))
     return capsys.readouterr().out
-
-
-def demo_file(path) -> tuple:
-    with np.load(path, allow_pickle=False) as data:
-        return {key: data[key] for key in data.files if key != "meta"}, json.loads(str(data["meta"]))
 
 
 @pytest.fixture

@@ -1,12 +1,14 @@
 """fca.py: the adversary is conditioned on a_t, the alternating updates push its loss in opposite
 directions, previous actions follow the episode structure, each learning rate decays from its own
 start, bad input, and a smoke run."""
+import re
+
 import numpy as np
 import pytest
 import torch
 
 import fca
-from conftest import assert_usage_error, run_in_process, smoke_run
+from conftest import SMOKE_DEMOS, assert_usage_error, demo_file, run_in_process, smoke_run
 
 OBS, ACT, HISTORY, EMBEDDING = 11, 3, 2, 8
 
@@ -176,8 +178,13 @@ def test_bad_method_parameters_are_rejected(flag, value, message):
 
 def test_smoke_run_logs_the_adversary_error(tmp_path):
     stdout, summary = smoke_run("fca.py", tmp_path)
-    progress = [line for line in stdout.splitlines() if "| epoch " in line]
-    assert len(progress) == 2 and all("| adversary error " in line for line in progress)
-    assert "adversary reference: predicting a_{t-1} = a_t has error" in stdout
+    errors = [float(error) for error in re.findall(r"^seed 1 \| epoch \d/2 \| loss [\d.]+ \| adversary error (\S+) \| last eval ", stdout, re.MULTILINE)]
+    assert len(errors) == 2 and all(0 < error < np.inf for error in errors), stdout
+    assert errors[0] != errors[1], "an epoch's mean of D's error, not a constant"
+    # the reference is D's error were it to predict a_{t-1} = a_t, on the run's demos
+    demos, _ = demo_file(tmp_path / SMOKE_DEMOS)
+    previous = fca.previous_actions(demos["actions"], demos["episode_starts"])
+    reference = re.search(r"adversary reference: predicting a_\{t-1\} = a_t has error (\S+)$", stdout, re.MULTILINE)
+    assert reference and float(reference[1]) == pytest.approx(np.mean((previous - demos["actions"]) ** 2), abs=1e-5)
     learning_rate = summary["args"]["learning_rate"]
     assert f"w = 2; learning rates: G and F {learning_rate:g}, D {2 * learning_rate:g}" in stdout, "Hopper: the authors' Hopper command"

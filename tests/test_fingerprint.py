@@ -10,9 +10,8 @@ import sys
 
 import numpy as np
 import pytest
-import test_pinned_output as pinned
 import torch
-from conftest import REPO_ROOT
+from conftest import BUDGET, FIXED_MODE, PIN_TOLERANCE, PINNED, REPO_ROOT
 
 from benchmark import fingerprint, machine
 
@@ -79,7 +78,7 @@ GLIBC = tuple(int(part) for part in platform.libc_ver()[1].split(".")[:2]) if pl
 def test_the_libm_probe_sees_glibc_choose_other_code_without_fma_and_the_pins_then_skip():
     """GLIBC_TUNABLES hides FMA from glibc alone (torch and MKL read the CPU themselves): libm's digits change, and
     the pinned tests know they no longer hold."""
-    code = "import test_pinned_output as t; from benchmark import fingerprint as f; print(f.libm_probe(), t.LIBM_AS_PINNED)"
+    code = "import conftest as t; from benchmark import fingerprint as f; print(f.libm_probe(), t.LIBM_AS_PINNED)"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), str(REPO_ROOT / "tests")])}
     runs = [subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True,
                            env={**env, "GLIBC_TUNABLES": tunables}) for tunables in ("", "glibc.cpu.hwcaps=-FMA")]
@@ -140,9 +139,9 @@ def test_compare_skips_a_stage_one_record_lacks_and_explains_the_difference():
 
 
 def test_the_fingerprinted_case_is_the_pinned_bc_oh_case():
-    script, flags, _, _ = pinned.PINNED["bc_oh"]
-    assert (fingerprint.METHOD, fingerprint.BUDGET, flags) == (script, list(map(str, pinned.BUDGET)), [])
-    assert fingerprint.FIXED_MODE == pinned.FIXED_MODE
+    script, flags, _, _ = PINNED["bc_oh"]
+    assert (fingerprint.METHOD, fingerprint.BUDGET, flags) == (script, list(map(str, BUDGET)), [])
+    assert fingerprint.FIXED_MODE == FIXED_MODE
     separate, together = fingerprint.case_commands("out", True), fingerprint.case_commands("out", False)
     assert [command[1:] for command in separate[1:]] == [command[1:] for command in together] and len(together) == 1
     assert separate[0][1].endswith("expert_ppo.py") and "--make-demos" in separate[0]
@@ -169,7 +168,7 @@ def test_the_stored_amd_epyc_record_is_the_pins_bit_for_bit():
     """The record made on an AMD EPYC (Zen 4) with fused Adam, the CPU and the code the pins were recorded with
     (issue 56): its run prints the pinned epoch lines and evaluations exactly."""
     record = json.loads((REPO_ROOT / "results" / "fingerprints" / "AuthenticAMD_AMD_EPYC.json").read_text())
-    _, _, lines, returns = pinned.PINNED["bc_oh"]
+    _, _, lines, returns = PINNED["bc_oh"]
     assert record["machine"]["MKL_CBWR"] == "COMPATIBLE" and record["machine"]["cpu_vendor"] == "AuthenticAMD"
     assert record["epoch_lines"] == lines
     assert record["evaluations"] == returns
@@ -189,7 +188,7 @@ def test_the_records_before_fused_adam_part_the_two_cpus_in_training_alone_withi
     assert amd["machine"]["cpu_vendor"] == "AuthenticAMD" and amd["machine"]["MKL_CBWR"] == "COMPATIBLE"
     assert intel["epoch_lines"] == amd["epoch_lines"]
     assert intel["evaluations"] != amd["evaluations"]
-    assert intel["evaluations"] == pytest.approx(amd["evaluations"], rel=pinned.PIN_TOLERANCE / 20)
+    assert intel["evaluations"] == pytest.approx(amd["evaluations"], rel=PIN_TOLERANCE / 20)
     assert set(intel["probes"]) == set(fingerprint.PROBES)
     assert fingerprint.compare(intel, amd) == "weights"
     assert fingerprint.probe_differences(intel, amd).startswith(

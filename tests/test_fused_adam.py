@@ -10,19 +10,9 @@ import torch
 import bc_oh
 import c2f
 import fca
-from conftest import REPO_ROOT, fake_demos, skip_evaluation, tiny_args
+from conftest import METHOD_FILES, REPO_ROOT, fake_demos, skip_evaluation, tiny_args
 
-METHOD_FILES = [
-    "bc_so",
-    "bc_oh",
-    "c2f",
-    "c2f_table3",
-    "fca",
-    "keyframe",
-    "history_dropout",
-    "average_ensemble",
-    "dagger",
-]
+METHODS = [file.removesuffix(".py") for file in METHOD_FILES]
 STATE_STEPS = 5
 """default Adam steps taken before the compared step, so that Adam's moments and step count are not zero"""
 
@@ -79,7 +69,7 @@ def test_one_fused_step_matches_one_default_step_from_the_same_state(module, bet
         assert (default - old).abs().max() > 1e-4 * scale
 
 
-@pytest.mark.parametrize("script", METHOD_FILES)
+@pytest.mark.parametrize("script", METHODS)
 def test_every_method_file_trains_with_fused_adam(script, monkeypatch):
     """A tiny training of each method file: every Adam it builds (keyframe's APE model and DAgger's rounds too)
     is fused."""

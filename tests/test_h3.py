@@ -2,12 +2,9 @@
 at the paper's setting, what it leaves out and why; and that the committed h3.md is what it makes now."""
 import json
 import shutil
-import subprocess
-import sys
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error
-from test_table3 import plant_run
+from conftest import REPO_ROOT, assert_usage_error, plant_run, run_module
 
 from benchmark import h3
 from benchmark.regimes import runs_dir
@@ -103,8 +100,7 @@ def test_reports_and_runs_that_do_not_fit_are_left_out_with_their_reason(planted
 
 
 def test_no_report_is_one_line_and_exit_2(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "benchmark.h3", "--analysis-dir", str(tmp_path)],
-                            cwd=REPO_ROOT, capture_output=True, text=True)
+    result = run_module("benchmark.h3", "--analysis-dir", tmp_path)
     assert_usage_error(result, "run copycat_analysis.py as docs/regimes.md shows")
     assert result.returncode == 2
 
@@ -114,18 +110,16 @@ def test_a_mistyped_reference_folder_is_one_line_and_exit_2(planted, tmp_path):
     argv, analysis, _ = planted
     argv = [*argv]
     argv[argv.index("--reference") + 1] = str(tmp_path / "nowhere")
-    result = subprocess.run([sys.executable, "-m", "benchmark.h3", *argv], cwd=REPO_ROOT, capture_output=True, text=True)
+    result = run_module("benchmark.h3", *argv)
     assert_usage_error(result, f"reference folder {tmp_path / 'nowhere'} not found: pass --reference")
     assert result.returncode == 2 and not (analysis / "h3.md").exists()
 
 
 def test_the_committed_h3_page_is_what_the_tool_makes_from_the_committed_reports(tmp_path):
     committed = REPO_ROOT / h3.ANALYSIS_DIR
-    if not (committed / "h3.md").exists():
-        pytest.skip("no committed h3.md yet")
     copy = shutil.copytree(committed, tmp_path / "native_hidden")
-    subprocess.run([sys.executable, "-m", "benchmark.h3", "--analysis-dir", str(copy)], cwd=REPO_ROOT, check=True,
-                   capture_output=True)
+    run = run_module("benchmark.h3", "--analysis-dir", copy)
+    assert run.returncode == 0, run.stderr
     made = (copy / "h3.md").read_text().replace(f" --analysis-dir {copy}", "")
     assert made == (committed / "h3.md").read_text(), "analysis h3.md is stale: run python -m benchmark.h3"
 

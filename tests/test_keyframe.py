@@ -1,11 +1,13 @@
 """keyframe.py: the weights have the requested fraction and factor, keyframes land on planted
 changepoints, previous actions follow the episode structure, bad input, and a smoke run."""
+import re
+
 import numpy as np
 import pytest
 import torch
 
 import keyframe
-from conftest import assert_usage_error, fake_demos, run_in_process, skip_evaluation, smoke_run, tiny_args
+from conftest import SMOKE_DEMOS, assert_usage_error, fake_demos, load_demos, one_torch_thread, run_in_process, skip_evaluation, smoke_run, tiny_args
 
 
 def piecewise_constant_actions(n=1200, act_dim=2, episode_length=300, seed=0):
@@ -98,6 +100,19 @@ def test_softmax_weighting_weighs_each_batch_by_its_own_errors(monkeypatch, caps
 
 def test_smoke_run_reports_keyframes_and_changepoints(tmp_path):
     stdout, summary = smoke_run("keyframe.py", tmp_path)
-    report = [line for line in stdout.splitlines() if "keyframes (top 10% of APE): 30 of 300 samples" in line]
-    assert len(report) == 1 and "at action changepoints" in report[0], stdout
+    pattern = r"seed 1 \| keyframes \(top 10% of APE\): (\d+) of (\d+) samples, (\d+) of them at action changepoints \(top 10% of \|\|a_t - a_\{t-1\}\|\|; (\d+) in all\)"
+    report = [match.groups() for match in re.finditer(pattern, stdout)]
+    assert len(report) == 1, stdout
     assert summary["args"]["weighting"] == "threshold" and summary["args"]["keyframe_weight"] == 5.0
+    # The counts are those keyframe.py's functions give on the run's demos, with the seed's torch state (train_seed's
+    # manual_seed(1), then nothing random before the action-prediction model) and its one thread.
+    demos, _ = load_demos(keyframe, demos=str(tmp_path / SMOKE_DEMOS))
+    actions, starts = demos["actions"], demos["episode_starts"]
+    with one_torch_thread():
+        torch.manual_seed(1)
+        ape = keyframe.action_prediction_errors(actions, starts, k=4, spacing=1, epochs=20, batch_size=64, device="cpu")
+    is_key, at_change = keyframe.keyframes(ape, 0.1).numpy(), keyframe.changepoints(actions, starts)
+    overlap = (is_key & at_change).sum()
+    assert tuple(map(int, report[0])) == (is_key.sum(), len(actions), overlap, at_change.sum())
+    assert is_key.sum() == at_change.sum() == 30
+    assert overlap > 2 * 30 * 30 / 300, "keyframes sit at changepoints far more often than 30 random samples would"

@@ -8,7 +8,7 @@ import pytest
 minari = pytest.importorskip("minari")
 import gymnasium as gym  # noqa: E402
 
-from conftest import assert_usage_error, make_demos, run_script, tiny_args  # noqa: E402
+from conftest import assert_usage_error, demo_file, make_demos, run_script, tiny_args  # noqa: E402
 
 KEYS = ("observations", "actions", "episode_starts", "rewards", "terminations", "truncations", "final_observations")
 
@@ -61,11 +61,6 @@ def as_demos(episodes):
             "final_observations": np.array([e["observations"][-1] for e in episodes], np.float64)}
 
 
-def load_npz(path):
-    with np.load(path, allow_pickle=False) as data:
-        return {key: data[key] for key in data.files}
-
-
 def assert_same_demos(got, expected):
     for key in KEYS:
         assert got[key].dtype == expected[key].dtype, key
@@ -84,9 +79,8 @@ def test_dataset_to_npz_to_dataset(tmp_path, minari_store):
     make_dataset("test/hopper/random-v0", episodes)
     result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "demos.npz")
     assert result.returncode == 0, result.stderr
-    demos = load_npz(tmp_path / "demos.npz")
+    demos, meta = demo_file(tmp_path / "demos.npz")
     assert_same_demos(demos, as_demos(episodes))
-    meta = json.loads(str(demos["meta"]))
     assert meta["env_id"] == "Hopper-v4" and meta["source"] == "minari:test/hopper/random-v0"
     assert meta["num_samples"] == sum(len(e["actions"]) for e in episodes) and meta["frame_skip"] == 4
 
@@ -96,7 +90,7 @@ def test_dataset_to_npz_to_dataset(tmp_path, minari_store):
     # a dataset folder works as well as an id
     result = run_script("scripts/minari_demos.py", "import", minari_store / "test/hopper/again-v0", tmp_path / "again.npz")
     assert result.returncode == 0, result.stderr
-    assert_same_demos(load_npz(tmp_path / "again.npz"), as_demos(episodes))
+    assert_same_demos(demo_file(tmp_path / "again.npz")[0], as_demos(episodes))
 
 
 def test_npz_to_dataset_to_npz(tmp_path):
@@ -111,7 +105,7 @@ def test_npz_to_dataset_to_npz(tmp_path):
     assert_same_dataset(dataset, episodes)
     result = run_script("scripts/minari_demos.py", "import", "copycat/hopper/test-v0", tmp_path / "back.npz")
     assert result.returncode == 0, result.stderr
-    assert_same_demos(load_npz(tmp_path / "back.npz"), demos)
+    assert_same_demos(demo_file(tmp_path / "back.npz")[0], demos)
 
 
 def test_num_samples_cuts_the_last_episode(tmp_path):
@@ -120,12 +114,12 @@ def test_num_samples_cuts_the_last_episode(tmp_path):
     n = len(episodes[0]["actions"]) + 5  # five steps into the second episode
     result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "cut.npz", "--num-samples", n)
     assert result.returncode == 0, result.stderr
-    demos, full = load_npz(tmp_path / "cut.npz"), as_demos(episodes)
+    (demos, meta), full = demo_file(tmp_path / "cut.npz"), as_demos(episodes)
     for key in ("observations", "actions", "episode_starts", "rewards", "terminations"):
         np.testing.assert_array_equal(demos[key], full[key][:n], err_msg=key)
     np.testing.assert_array_equal(demos["truncations"], np.r_[full["truncations"][:n - 1], True])
     np.testing.assert_array_equal(demos["final_observations"], [full["final_observations"][0], episodes[1]["observations"][5]])
-    assert json.loads(str(demos["meta"]))["num_samples"] == n
+    assert meta["num_samples"] == n
     result = run_script("scripts/minari_demos.py", "import", "test/hopper/random-v0", tmp_path / "cut.npz", "--num-samples", 10**6)
     refused(result, "--num-samples")
 
@@ -151,7 +145,7 @@ def test_a_make_demos_file_goes_to_minari_and_back_unchanged(tmp_path):
     assert result.returncode == 0, result.stderr
     result = run_script("scripts/minari_demos.py", "import", "copycat/hopper/made-v0", tmp_path / "back.npz")
     assert result.returncode == 0, result.stderr
-    assert_same_demos(load_npz(tmp_path / "back.npz"), load_npz(made))
+    assert_same_demos(demo_file(tmp_path / "back.npz")[0], demo_file(made)[0])
 
 
 def refused(result, expected):
@@ -183,7 +177,8 @@ def test_refusals(tmp_path):
     assert not list(tmp_path.glob("demos*"))
     assert not (tmp_path / "x.npz").exists()
 
-    demos = as_demos(random_episodes(gym.spaces.Box(-1, 1, (11,)), 3))
+    hopper_episodes = random_episodes(gym.spaces.Box(-1, 1, (11,)), 3)
+    demos = as_demos(hopper_episodes)
     old = {key: demos[key] for key in ("observations", "actions", "episode_starts")}  # made before rewards were kept
     np.savez(tmp_path / "old.npz", meta=np.array(json.dumps({"env_id": "Hopper-v4", "frame_skip": 4})), **old)
     result = run_script("scripts/minari_demos.py", "export", tmp_path / "old.npz", "test/old-v0")
@@ -199,7 +194,10 @@ def test_refusals(tmp_path):
     refused(run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/pendulum-v0", "--env", "Hopper-v4"), "already exists")
     refused(run_script("scripts/minari_demos.py", "frobnicate"), "invalid choice")
     result = run_script("scripts/minari_demos.py", "export", tmp_path / "new.npz", "test/new-v0", "--env", "Hopper-v4")
-    assert result.returncode == 0, result.stderr  # the same file with its env named is fine
+    assert result.returncode == 0, result.stderr  # the same file with its env named is fine: its episodes, on that env
+    dataset = minari.load_dataset("test/new-v0")
+    assert dataset.env_spec.id == "Hopper-v4"
+    assert_same_dataset(dataset, hopper_episodes)
 
 
 def test_the_import_goes_through_the_method_files_loader(tmp_path, monkeypatch, capsys):

@@ -1,53 +1,29 @@
 """--seeds 1 2 --workers 2 trains the seeds in two processes at once (issue 22): each seed prints and scores
 exactly what it does when the seeds run one after another, and the combined result holds both, in order."""
-import json
-import re
 from types import SimpleNamespace
 
 import numpy as np
 
-from conftest import assert_usage_error, demos_made_in, fake_demos, link_experts, run_in_process, run_script, skip_evaluation, tiny_args
+from conftest import LIBM_AS_PINNED, PINNED, assert_usage_error, fake_demos, run_in_process, skip_evaluation, tiny_args, tiny_run
 import pytest
-from test_pinned_output import BUDGET, FIXED_MODE, LIBM_AS_PINNED, PINNED
-
-TWO_SEEDS = (*BUDGET[:BUDGET.index("--seeds")], *BUDGET[BUDGET.index("--seeds") + 2:], "--seeds", 1, 2)
-"""test_pinned_output's tiny budget, with two seeds"""
-
-
-@pytest.fixture
-def fixed_mode_demos():
-    """The demos of the pins, made as test_pinned_output makes them: by expert_ppo.py --make-demos in the fixed mode
-    (the session's demo files are made in the default mode, whose last digits differ by CPU)."""
-    return demos_made_in(FIXED_MODE, *BUDGET[:2], *BUDGET[-2:])
-
-
-def tiny_run(folder, script: str, workers: int, demos) -> tuple:
-    """({seed: its printed epoch lines without timings}, {seed: its JSON evaluations}, the combined JSON, stdout) of a
-    run."""
-    folder.mkdir()
-    link_experts(folder, demos=False)
-    (folder / "demos").symlink_to(demos, target_is_directory=True)
-    flags = PINNED[script][1]  # dagger's small rounds; none for the others
-    result = run_script(f"{script}.py", *TWO_SEEDS, *flags, "--workers", workers, "--output-dir", folder / "out", cwd=folder, env=FIXED_MODE)
-    assert result.returncode == 0, result.stderr
-    lines = {seed: re.findall(rf"^seed {seed} \| (.*last eval \S+(?:, \w+ \S+)*) \| [\d.]+ ms/step", result.stdout, re.M) for seed in (1, 2)}
-    evaluations = {seed: json.loads((folder / "out" / f"result_seeds{seed}.json").read_text())["scores"][str(seed)]["evaluations"]
-                   for seed in (1, 2)}
-    return lines, evaluations, json.loads((folder / "out" / "result_seeds1-2.json").read_text()), result.stdout
 
 
 @pytest.mark.parametrize("script", ["bc_oh", "average_ensemble", "dagger"])
-def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script, fixed_mode_demos):
-    """bc_oh stands for the scripts that share its training loop; average_ensemble and dagger have their own fits."""
-    parallel_lines, parallel_evaluations, combined, parallel_out = tiny_run(tmp_path / "two", script, 2, fixed_mode_demos)
-    lines, evaluations, sequential, out = tiny_run(tmp_path / "one", script, 1, fixed_mode_demos)
+def test_two_workers_train_each_seed_as_one_worker_does(tmp_path, script):
+    """bc_oh stands for the scripts that share its training loop; average_ensemble and dagger have their own fits. The
+    runs are the pins' (conftest.tiny_run: their budget and demos, in the fixed mode), with two seeds."""
+    flags = PINNED[script][1]  # dagger's small rounds; none for the others
+    parallel = tiny_run(tmp_path / "two", script, [*flags, "--workers", 2], seeds=(1, 2))
+    sequential = tiny_run(tmp_path / "one", script, [*flags, "--workers", 1], seeds=(1, 2))
+    lines = sequential.lines
     assert all(len(lines[seed]) == len(PINNED[script][2]) for seed in (1, 2)) and lines[1] != lines[2]
     assert lines[1] == PINNED[script][2] or not LIBM_AS_PINNED  # seed 1 of two prints what seed 1 alone prints
-    assert parallel_lines == lines, f"two workers printed:\n{parallel_out}\none worker printed:\n{out}"
-    assert parallel_evaluations == evaluations
+    assert parallel.lines == lines, f"two workers printed:\n{parallel.stdout}\none worker printed:\n{sequential.stdout}"
+    assert parallel.evaluations == sequential.evaluations
+    combined = parallel.result
     assert list(combined["scores"]) == ["1", "2"] and combined["args"]["seeds"] == [1, 2] and combined["args"]["workers"] == 2
-    assert [combined["scores"][s]["evaluations"] for s in "12"] == [evaluations[1], evaluations[2]]
-    assert combined["mean"] == sequential["mean"]
+    assert [combined["scores"][s]["evaluations"] for s in "12"] == [sequential.evaluations[1], sequential.evaluations[2]]
+    assert combined["mean"] == sequential.result["mean"]
 
 
 def test_workers_must_be_positive():

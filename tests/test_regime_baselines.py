@@ -1,35 +1,20 @@
 """benchmark/regime_baselines.py on a small planted native_hidden map and fs1_noise control: the declared verdicts of
 the 22 comparisons, the control's reading, the count of separated ones and its declared reading, what is left out,
 and the header's commits and machines."""
-import json
-import subprocess
-import sys
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error
-from test_benchmark import plant
-from test_regime_summary import plant_expert, plant_variant
+from conftest import (
+    assert_usage_error,
+    plant_expert,
+    plant_run,
+    run_module,
+    set_machine,
+)
 
 from benchmark import regime_baselines as rb
-from benchmark.paper import variant_flags
 from benchmark.regimes import runs_dir
 
 HOPPER, WALKER = "Hopper-v4", "Walker2d-v4"
-REGIME_FLAGS = {"native_hidden": {"hide_velocities": True}, "fs1_noise": {"frame_skip": 1}}
-
-
-def plant_run(runs, regime, method, env, seed, score, **settings):
-    """A valid result of method (a method file or a c2f variant) in the regime scoring `score`; settings change it."""
-    settings = {**REGIME_FLAGS[regime], **variant_flags(method), **settings}
-    if method.startswith("c2f_"):
-        return plant_variant(runs, method, "c2f", env, seed, [score] * 3, **settings)
-    return plant(runs, method, env, seed, [score] * 3, **settings)
-
-
-def set_machine(path, cpu, capability):
-    result = json.loads(path.read_text())
-    result["machine"] = {"cpu": cpu, "cpu_capability": capability, "torch": "2.13.0+cpu"}
-    path.write_text(json.dumps(result))
 
 
 def steps(start, count=5):
@@ -62,15 +47,15 @@ def planted(tmp_path):
     for env, cells in SCORES.items():
         for method, scores in cells.items():
             for seed, score in enumerate(scores, 1):
-                path = plant_run(native, "native_hidden", method, env, seed, score)
+                path = plant_run(native, method, seed, score, env, "native_hidden", script="c2f")
                 if method == "fca":
                     set_machine(path, "Test CPU", "AVX512")
     for method, scores in FS1.items():
         for seed, score in enumerate(scores, 1):
-            plant_run(fs1, "fs1_noise", method, WALKER, seed, score)
-    plant_run(native, "native_hidden", "c2f_middle", HOPPER, 1, 5000.0)  # Table 3's: not listed
-    plant_run(fs1, "fs1_noise", "bc_oh", HOPPER, 1, 5000.0)  # not part of this comparison: not listed
-    left_out = [f"left out {plant_run(native, 'native_hidden', 'dagger', HOPPER, 1, 5000.0, hide_velocities=False)}: "
+            plant_run(fs1, method, seed, score, WALKER, "fs1_noise", script="c2f")
+    plant_run(native, "c2f_middle", 1, 5000.0, HOPPER, "native_hidden", script="c2f")  # Table 3's: not listed
+    plant_run(fs1, "bc_oh", 1, 5000.0, HOPPER, "fs1_noise")  # not part of this comparison: not listed
+    left_out = [f"left out {plant_run(native, 'dagger', 1, 5000.0, HOPPER, 'native_hidden', hide_velocities=False)}: "
                 "not the native_hidden settings (hide_velocities False != True)",
                 f"left out {native / 'fca' / WALKER / 'result_seeds6.json'}: unreadable JSON",
                 f"left out {native / 'c2f_no_coarse' / HOPPER} seeds 6–10: valid, but seeds 1–5 count here (declared)"]
@@ -222,8 +207,7 @@ def test_the_picture_is_written_and_a_missing_map_is_one_line(planted, tmp_path)
     summarise(results, experts)
     assert (results / "native_hidden" / "table2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list((results / "native_hidden").glob("*.tmp*"))
-    result = subprocess.run([sys.executable, "-m", "benchmark.regime_baselines", "--results-dir", str(tmp_path / "nowhere")],
-                            cwd=REPO_ROOT, capture_output=True, text=True)
+    result = run_module("benchmark.regime_baselines", "--results-dir", tmp_path / "nowhere")
     assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
     assert result.returncode == 2
 

@@ -10,9 +10,10 @@ import pytest
 import torch
 
 import bc_oh
+import c2f
 import c2f_table3
-from conftest import (assert_usage_error, fake_demos, link_experts, load_demos, make_demos, run_in_process, run_script,
-                      tiny_args)
+from conftest import (assert_usage_error, check_summary, demo_file, fake_demos, link_experts, load_demos, make_demos, run_in_process,
+                      run_script, tiny_args)
 
 HOPPER_VELOCITIES = list(range(5, 11))
 POSITIONS = list(range(0, 5))
@@ -41,6 +42,15 @@ def test_frame_skip_one_keeps_simulated_time_and_return_scale():
     assert fast_reward == pytest.approx(raw_reward / 4)  # every reward x frame_skip / native
     assert fast_time == pytest.approx(0.002) and step_once(native, action)[1] == pytest.approx(0.008)
     assert bc_oh.make_env("HalfCheetah-v4", 1).spec.max_episode_steps == 5000  # native 5
+    # step by step: the plain env's states at frame skip 1, each reward a quarter of its (expert_ppo.make_env, which
+    # makes the experts' demos, is a checked copy of bc_oh.make_env: test_check_copies)
+    (obs, _), (raw_obs, _) = fast.reset(seed=3), raw.reset(seed=3)
+    np.testing.assert_array_equal(obs, raw_obs)
+    for action in np.random.default_rng(0).uniform(-1, 1, (5, 3)):
+        obs, reward, *_ = fast.step(action)
+        raw_obs, raw_reward, *_ = raw.step(action)
+        np.testing.assert_array_equal(obs, raw_obs)
+        assert reward == pytest.approx(raw_reward / 4, rel=1e-12)
 
 
 def test_frame_skip_one_episode_return_matches_the_native_scale():
@@ -130,11 +140,6 @@ def test_the_copy_error_line_against_hand_computed_values(tmp_path, capsys):
 # Demo caches per rate
 
 
-def meta_of(path) -> dict:
-    with np.load(path, allow_pickle=False) as data:
-        return json.loads(str(data["meta"]))
-
-
 def reported_copy_error(out: str) -> float:
     line = next(line for line in out.splitlines() if line.startswith("demos: copy error"))
     return float(line.split("copy error MSE(a_{t-1}, a_t)/Var(a) = ")[1].split()[0])
@@ -147,7 +152,7 @@ def test_demos_per_rate_and_the_copy_error_line(tmp_path, monkeypatch, capsys):
     fast, meta = load_demos(bc_oh, num_demo_samples=120, frame_skip=1)
     out = capsys.readouterr().out
     assert "demos: 120 steps from demos/Hopper-v4_fs1_120.npz\n" in out
-    assert meta["frame_skip"] == 1 and meta == meta_of(make_demos("Hopper-v4", 120, 1))
+    assert meta["frame_skip"] == 1 and meta == demo_file(make_demos("Hopper-v4", 120, 1))[1]
     native, meta = load_demos(bc_oh, num_demo_samples=120)
     native_out = capsys.readouterr().out
     assert meta["frame_skip"] == 4 and "demos: 120 steps from demos/Hopper-v4_120.npz\n" in native_out
@@ -161,8 +166,7 @@ def test_a_file_made_at_another_rate_is_not_reused(tmp_path, monkeypatch):
     monkeypatch.chdir(link_experts(tmp_path, demos=False))
     made = run_in_process("expert_ppo.py", "--make-demos", "--frame-skip", 1, "--num-demo-samples", 120)
     assert made.returncode == 0 and made.stdout.splitlines()[-1] == "wrote demos/Hopper-v4_fs1_120.npz", made.stderr
-    with np.load("demos/Hopper-v4_fs1_120.npz") as saved:
-        fast = saved["observations"]
+    fast = demo_file("demos/Hopper-v4_fs1_120.npz")[0]["observations"]
     (tmp_path / "demos" / "Hopper-v4_fs1_120.npz").rename(tmp_path / "demos" / "Hopper-v4_120.npz")
     with pytest.raises(bc_oh.UsageError, match=r"^demos/Hopper-v4_120.npz was made at frame skip 1 \(the env's own if its meta has none\), not 4: pass --frame-skip 1$"):
         load_demos(bc_oh, num_demo_samples=120)
@@ -211,18 +215,6 @@ def c2f_policy(**options):
 TABLE3_FLAGS = ["fusion", "coarse_output", "coarse_input", "policy_input", "stop_gradient", "coarse_action", "two_stage"]
 
 
-def test_output_fusion_joins_an_action_sized_policy_output_with_zeta():
-    policy = c2f_policy(fusion="output")
-    assert policy.policy_rest[-1].out_features == 3, "the policy MLP outputs an action-sized vector"
-    assert policy.head.in_features == 2 * 3, "the last layer sees exactly [policy output, sg(zeta)]"
-    inputs = torch.randn(7, 22)
-    zeta, action = policy.coarse_and_final(inputs)
-    assert zeta.shape == action.shape == (7, 3)
-    policy_output = policy.policy_rest(policy.policy_first(policy.normalize(inputs)))
-    expected = policy.head(torch.cat([policy_output, zeta], dim=1))
-    assert torch.allclose(action, expected)
-
-
 @pytest.mark.parametrize("stop_gradient", [True, False])
 def test_output_fusion_stop_gradient(stop_gradient):
     policy = c2f_policy(fusion="output", stop_gradient=stop_gradient)
@@ -244,23 +236,38 @@ def test_hidden_velocities_touch_only_the_policys_view(tmp_path, monkeypatch):
     monkeypatch.chdir(link_experts(tmp_path))
     demos, _ = load_demos(bc_oh, num_demo_samples=120, hide_velocities=True)
     assert (demos["observations"][:, HOPPER_VELOCITIES] != 0).mean() > 0.9
-    with np.load(make_demos("Hopper-v4", 120)) as saved:
-        assert np.array_equal(saved["observations"], demos["observations"])
+    assert np.array_equal(demo_file(make_demos("Hopper-v4", 120))[0]["observations"], demos["observations"])
 
 
 @pytest.mark.parametrize("env", ["Hopper-v5", "Ant-v5"])
 def test_a_method_file_runs_on_v5_envs_with_the_shipped_experts(tmp_path, env):
     """v5: demos from the shipped (re-targeted) expert, noise on the velocities that observation_structure names
-    (Ant-v5: 13-26 of 105), a tiny training run that ends with the summary line."""
+    (Ant-v5: 13-26 of 105), on the demos and in the sensor the evaluation reads, through c2f.py's own functions, and a
+    tiny training run of c2f.py that ends with the summary line."""
     link_experts(tmp_path)
-    assert meta_of(make_demos(env, 200))["source"] == f"experts/{env}.pt"  # linked as tmp_path/demos/{env}_200.npz
+    demos, meta = demo_file(make_demos(env, 200))  # linked as tmp_path/demos/{env}_200.npz
+    assert meta["source"] == f"experts/{env}.pt"
     result = run_script("c2f.py", "--env", env, "--seeds", 1, "--epochs", 1, "--eval-every", 1, "--eval-episodes", 1,
                         "--num-demo-samples", 200, "--output-dir", tmp_path / "out", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip().splitlines()[-1].startswith(f"{env} c2f: ") and "% of the expert's " in result.stdout
-    with np.load(tmp_path / "demos" / f"{env}_200.npz") as demos:
-        assert demos["observations"].shape[1] == gym.make(env).observation_space.shape[0]
-    assert bc_oh.velocity_dims(gym.make(env), env) == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
+    check_summary(result.stdout, tmp_path, tmp_path / "out", "c2f", expert=meta["expert_return"], env=env)
+    plain = gym.make(env)
+    structure = plain.unwrapped.observation_structure
+    velocities = list(range(structure["qpos"], structure["qpos"] + structure["qvel"]))
+    assert velocities == (list(range(13, 27)) if env == "Ant-v5" else HOPPER_VELOCITIES)
+    assert demos["observations"].shape[1] == plain.observation_space.shape[0]
+    # training: the noise train_seed draws on the demos changes those entries, all of them, and no other
+    dims = c2f.velocity_dims(c2f.make_env(env), env)
+    noisy = c2f.partially_observe(demos["observations"], dims, 0.2, False, seed=1)
+    assert np.flatnonzero((noisy != demos["observations"]).any(axis=0)).tolist() == velocities
+    assert np.array_equal(np.delete(noisy, velocities, axis=1), np.delete(demos["observations"], velocities, axis=1))
+    # evaluation: the sensor env observes the plain env's state with noise on those entries only
+    sensor = c2f.make_sensor_env(c2f.Args(env=env), seed=1)
+    observed, true = sensor.reset(seed=3)[0], plain.reset(seed=3)[0]
+    for action in [None, *np.random.default_rng(0).uniform(-0.5, 0.5, (3, plain.action_space.shape[0]))]:
+        if action is not None:
+            observed, true = sensor.step(action)[0], plain.step(action)[0]
+        assert np.flatnonzero(observed != true).tolist() == velocities
 
 
 def test_a_demo_file_without_a_rate_counts_as_native_and_is_refused_at_another(tmp_path, monkeypatch):

@@ -1,16 +1,11 @@
 """benchmark/stats.py against hand-computed figures, and benchmark/regime_summary.py on a small synthetic regime map."""
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error
-from test_benchmark import plant
+from conftest import REPO_ROOT, assert_usage_error, plant, run_module, summarise
 
 from benchmark import aggregate, regime_summary
 from benchmark.regimes import runs_dir
-from benchmark.results import make_result, result_path
 from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
 
 # ----------------------------------------------------------------------------------------------
@@ -61,49 +56,6 @@ def test_expert_normalised():
 
 # ----------------------------------------------------------------------------------------------
 # The summary CLI
-
-
-def plant_expert(runs, env, score):
-    path = result_path(runs, "expert", env, [0])
-    path.parent.mkdir(parents=True)
-    path.write_text(json.dumps(make_result(env, "expert", {"env": env, "seeds": [0], "eval_episodes": 20}, {0: [[0, score]]})))
-
-
-def plant_variant(runs, method, script, env, seed, returns, **settings):
-    """plant() for a method variant: its script's result (method "c2f") in the variant's folder (c2f_output)."""
-    path = result_path(runs, method, env, [seed])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return plant(runs.parent / "staging", script, env, seed, returns, **settings).replace(path)
-
-
-@pytest.fixture
-def regime_map(tmp_path):
-    """native_noise: Hopper BC-SO 100, 300; BC-OH 200, 400; C2F 500, 700; C2F output 600 (and seed 2 without
-    --fusion output); Walker2d BC-OH 80. fs1_noise: Hopper BC-OH 50 (and seed 2 at the native rate, and a corrupt
-    seed 3 of BC-SO). Experts: Hopper 1000, Walker2d 400. native_noise has a README.md that says where its runs come from."""
-    results, experts = tmp_path / "results" / "regimes", tmp_path / "runs"
-    native, fs1 = runs_dir("native_noise", results), runs_dir("fs1_noise", results)
-    for method, scores in (("bc_so", (100, 300)), ("bc_oh", (200, 400)), ("c2f", (500, 700))):
-        for seed, score in enumerate(scores, 1):
-            plant(native, method, "Hopper-v4", seed, [0.0, score - 10.0, score, score + 10.0])  # the first evaluation drops out
-    plant_variant(native, "c2f_output", "c2f", "Hopper-v4", 1, [600.0] * 3, fusion="output")
-    plant(native, "bc_oh", "Walker2d-v4", 1, [80.0] * 3)
-    plant(fs1, "bc_oh", "Hopper-v4", 1, [50.0] * 3, frame_skip=1)
-    problems = [
-        f"left out {plant_variant(native, 'c2f_output', 'c2f', 'Hopper-v4', 2, [9.0] * 3)}: not the native_noise settings (fusion late != output)",
-        f"left out {plant(fs1, 'bc_oh', 'Hopper-v4', 2, [9.0] * 3)}: not the fs1_noise settings (frame_skip 4 != 1)",
-        f"left out {result_path(fs1, 'bc_so', 'Hopper-v4', [3])}: unreadable JSON",
-    ]
-    result_path(fs1, "bc_so", "Hopper-v4", [3]).parent.mkdir(parents=True)
-    result_path(fs1, "bc_so", "Hopper-v4", [3]).write_text("{not json")
-    plant_expert(experts, "Hopper-v4", 1000.0)
-    plant_expert(experts, "Walker2d-v4", 400.0)
-    (results / "native_noise" / "README.md").write_text("where these runs come from\n")
-    return results, experts, problems
-
-
-def summarise(results, experts, *args):
-    return regime_summary.main(["--results-dir", str(results), "--expert-runs", str(experts), *map(str, args)])
 
 
 def test_summary_numbers_files_and_left_out_runs(regime_map, capsys):
@@ -176,7 +128,7 @@ def test_docs_regimes_md_holds_the_committed_map():
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "benchmark.regime_summary", *map(str, args)], cwd=REPO_ROOT, capture_output=True, text=True)
+    return run_module("benchmark.regime_summary", *args)
 
 
 def test_bad_input_is_one_line_and_exit_2(regime_map, tmp_path):

@@ -10,11 +10,9 @@ import sys
 
 import pytest
 
-from conftest import REPO_ROOT
+from conftest import METHOD_FILES, REPO_ROOT, check_summary, demo_file
 
 SCRIPTS = sorted(path.name for path in REPO_ROOT.glob("*.py"))
-METHOD_FILES = ["bc_so.py", "bc_oh.py", "c2f.py", "c2f_table3.py", "fca.py", "keyframe.py", "history_dropout.py", "average_ensemble.py",
-                "dagger.py"]
 OWN_MODULES = {path.stem for path in REPO_ROOT.glob("*.py")} | {"benchmark", "scripts", "tests", "conftest", "check_copies"}
 
 
@@ -124,6 +122,8 @@ def test_a_method_file_trains_alone_in_an_empty_folder_with_its_demo_file(script
               "--batch-size", "32", *(["--dagger-samples", "20", "--dagger-rounds", "1", "--dagger-epochs", "1"] if script == "dagger.py" else [])]
     result = subprocess.run([sys.executable, script, *budget], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip().splitlines()[-1].startswith(f"Hopper-v4 {script.removesuffix('.py')}: ")
     (result_file,) = tmp_path.glob("runs/Hopper-v4__*__*/result_seeds1.json")
+    # the summary line (the mean as printed, the share of the expert's return in the demos' meta) agrees with the JSON
+    expert = demo_file(tmp_path / "demos" / "Hopper-v4_120.npz")[1]["expert_return"]
+    check_summary(result.stdout, tmp_path, result_file.parent.relative_to(tmp_path), script.removesuffix(".py"), expert=expert)
     assert set(os.listdir(tmp_path)) == {script, "demos", "runs", *(["experts"] if script == "dagger.py" else [])}

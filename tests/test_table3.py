@@ -2,35 +2,22 @@
 pooled where, what is left out and why, the header's commits and machines, and the picture. The Table 3 rows run
 c2f_table3.py; their results made by c2f.py before it held the ablations (method "c2f") count alike."""
 import json
-import subprocess
-import sys
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error
-from test_benchmark import plant
-from test_regime_summary import plant_expert, plant_variant
+from conftest import (
+    assert_usage_error,
+    plant,
+    plant_expert,
+    plant_run,
+    run_module,
+    set_machine,
+)
 
 from benchmark import table3
-from benchmark.paper import script_of, variant_flags
 from benchmark.regimes import runs_dir
 from benchmark.results import ResultError, read_result
 
 ENV = "Hopper-v4"
-
-
-def plant_run(runs, method, seed, score, **settings):
-    """A valid native_hidden result of method (a plain method file, or a c2f_table3.py variant with the variant's
-    flags) scoring `score`; settings change it (e.g. hide_velocities=False)."""
-    settings = {"hide_velocities": True, **variant_flags(method), **settings}
-    if method in ("bc_so", "bc_oh", "c2f"):
-        return plant(runs, method, ENV, seed, [score] * 3, **settings)
-    return plant_variant(runs, method, script_of(method), ENV, seed, [score] * 3, **settings)
-
-
-def set_machine(path, cpu, capability):
-    result = json.loads(path.read_text())
-    result["machine"] = {"cpu": cpu, "cpu_capability": capability, "torch": "2.13.0+cpu"}
-    path.write_text(json.dumps(result))
 
 
 @pytest.fixture
@@ -244,7 +231,6 @@ def test_seed_ranges():
 
 
 def test_no_map_folder_is_one_line_and_exit_2(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "benchmark.table3", "--results-dir", str(tmp_path / "nowhere")],
-                            cwd=REPO_ROOT, capture_output=True, text=True)
+    result = run_module("benchmark.table3", "--results-dir", tmp_path / "nowhere")
     assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
     assert result.returncode == 2

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from conftest import (REPO_ROOT, assert_usage_error, fake_demos, link_experts, load_demos, make_demos, run_in_process, skip_evaluation,
+from conftest import (REPO_ROOT, assert_usage_error, demo_file, fake_demos, link_experts, load_demos, make_demos, run_in_process, skip_evaluation,
                       tiny_args)
 
 import bc_oh
@@ -147,15 +147,10 @@ def test_an_interrupted_job_keeps_each_seed_that_finished(tmp_path, monkeypatch,
     assert first["args"]["seeds"] == [1] and list(first["scores"]) == ["1"] and first["scores"]["1"]["score"] == 7.0
 
 
-def demo_meta(path) -> dict:
-    with np.load(path, allow_pickle=False) as data:
-        return json.loads(str(data["meta"]))
-
-
 def test_the_summary_line_gives_the_share_of_the_experts_return(tmp_path, monkeypatch, capsys):
     """The share comes from the expert's return that expert_ppo.py --make-demos recorded in the demos' meta (each
     seed's evaluations return a set share of it here: 40% for seed 1, 42% for seed 2)."""
-    meta = demo_meta(make_demos("Hopper-v4", 300))
+    meta = demo_file(make_demos("Hopper-v4", 300))[1]
     expert = torch.load(REPO_ROOT / "experts" / "Hopper-v4.pt", weights_only=True)["eval_return"]
     assert (meta["expert_return"], meta["expert_frame_skip"]) == (expert, 4)
     share = lambda policy, args, episodes, seed, device: [expert * (0.38 + 0.02 * (seed // 10_000))] * episodes  # noqa: E731
