@@ -300,6 +300,9 @@ def load_demos(args, env: gym.Env) -> tuple:
         path = f"demos/{args.env}_{n}.npz"
     elif path is None:
         path = f"demos/{args.env}_fs{args.frame_skip}_{n}.npz"
+    here = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.isfile(path) and os.path.isfile(os.path.join(here, path)):
+        raise UsageError(f"demo file {path} not found in {os.getcwd()}: run from {here}")
     if not os.path.isfile(path) and args.demos is not None:
         raise UsageError(f"demo file {path} not found in {os.getcwd()}: check --demos")
     if not os.path.isfile(path):

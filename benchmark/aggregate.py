@@ -19,7 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
-from benchmark.paper import METHOD_NAMES, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark.paper import METHOD_NAMES, NATIVE_FRAME_SKIP, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
 
 
@@ -114,9 +116,18 @@ def format_cell(mean, std) -> str:
 
 
 def settings_text() -> str:
-    hopper, other = paper_settings("Hopper-v4"), paper_settings("Ant-v4")
-    return ", ".join(f"{name} {hopper[name]}" if hopper[name] == other[name] else f"{name} {hopper[name]} Hopper / {other[name]} otherwise"
-                     for name in hopper)
+    """The paper's settings; where the envs differ, each value with the envs that take it (frame_skip: each env's own)."""
+    per_family = {family: paper_settings(f"{family}-v4") for family in NATIVE_FRAME_SKIP}
+    parts = []
+    for name in per_family["Hopper"]:
+        families_of = {}
+        for family, settings in per_family.items():
+            families_of.setdefault(settings[name], []).append(family)
+        if len(families_of) == 1:
+            parts.append(f"{name} {per_family['Hopper'][name]}")
+        else:
+            parts.append(f"{name} " + " / ".join(f"{value} ({', '.join(families)})" for value, families in families_of.items()))
+    return "; ".join(parts)
 
 
 def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, page=None) -> str:

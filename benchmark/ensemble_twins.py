@@ -23,6 +23,8 @@ import torch
 import torch.nn as nn
 import tyro
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import average_ensemble
 from benchmark.machine import machine
 from benchmark.results import write_text

@@ -8,10 +8,13 @@ Reads every `<dir>/fca/<env>/seed<S>.log` with its `result_seeds<S>.json` (a log
 going and is left out), writes `<out>/fca_compare.md` and `<out>/fca_adversary.png`.
 """
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.aggregate import save_figure
 from benchmark.paper import PAPER_TABLE2
 from benchmark.results import OneLineParser, ResultError, UsageError, read_result, run_cli, write_text

@@ -20,6 +20,8 @@ import statistics
 import sys
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import regime_summary
 from benchmark.regimes import RESULTS_DIR
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text

@@ -20,6 +20,8 @@ import statistics
 import sys
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import aggregate, fca_compare, regime_summary
 from benchmark.paper import METHOD_NAMES
 from benchmark.regimes import REGIMES, RESULTS_DIR, runs_dir

@@ -16,6 +16,8 @@ import statistics
 import sys
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import aggregate, run_grid
 from benchmark.paper import METHOD_NAMES, setting_differences
 from benchmark.regimes import ENVS, METHODS, REGIMES, RESULTS_DIR, runs_dir

@@ -11,8 +11,11 @@ the commit of the scripts that made the runs: a method's runs in a regime must b
 (The map's first methods share <regime>/runs/commit.txt.)
 """
 import subprocess
+import sys
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import run_grid
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 

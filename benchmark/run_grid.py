@@ -33,6 +33,8 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.paper import VARIANTS, as_flags, paper_settings, script_of, setting_differences, variant_flags, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, make_result, read_result, result_path, run_cli, write_text
 

@@ -10,9 +10,12 @@ DAgger 468,100 (then four rounds of 100 epochs on the growing aggregate). Result
 before the runners wrote one) are counted, not used: the machine they ran on is unknown.
 """
 import json
+import sys
 from collections import defaultdict
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 
 HOPPER_STEPS = {"dagger": 468_100}

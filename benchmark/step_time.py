@@ -19,6 +19,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+# Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at
 from benchmark.results import OneLineParser, UsageError, run_cli
 

@@ -1,7 +1,8 @@
 """Evaluate a policy that a method file saved with --save-model, the CleanRL way.
 
-    python scripts/evaluate.py runs/c2f/Hopper-v4/seed1.pt
-    python scripts/evaluate.py runs/c2f/Hopper-v4/seed1.pt --episodes 20 --seed 100
+    python c2f.py --env Hopper-v4 --seeds 1 --save-model --output-dir runs/c2f_hopper
+    python scripts/evaluate.py runs/c2f_hopper/seed1.pt
+    python scripts/evaluate.py runs/c2f_hopper/seed1.pt --episodes 20 --seed 100
 
 The checkpoint names its method: this script imports that method file from the repository root,
 rebuilds its policy with the file's own make_policy (on zero inputs of the saved shape:
@@ -45,7 +46,7 @@ def read_checkpoint(path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise UsageError(
-            f"checkpoint {path} not found: {SAVE_FIX}, e.g. runs/bc_oh/Hopper-v4/seed1.pt"
+            f"checkpoint {path} not found: {SAVE_FIX}, e.g. runs/Hopper-v4__bc_oh__<time>/seed1.pt"
         )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)

@@ -1,9 +1,8 @@
 r"""Watch saved policies act: one or more --save-model checkpoints, side by side on the same
 episode start, to a GIF.
 
-    python scripts/watch.py runs/bc_oh/Hopper-v4/seed1.pt runs/c2f/Hopper-v4/seed1.pt \
-        --output watch.gif
-    python scripts/watch.py runs/c2f/Hopper-v4/seed1.pt --output c2f.gif --seed 7 \
+    python scripts/watch.py runs/bc_oh_hopper/seed1.pt runs/c2f_hopper/seed1.pt --output watch.gif
+    python scripts/watch.py runs/c2f_hopper/seed1.pt --output c2f.gif --seed 7 \
         --max-steps 300 --width 480 --height 360
 
 Each panel is one policy, rebuilt as scripts/evaluate.py rebuilds it, playing the episode that
