@@ -464,3 +464,31 @@ def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_t
         step_time.main(["--scripts", "nothing"])
     with pytest.raises(UsageError, match="must be positive"):
         main_job_time.main(["--repeats", "0"])
+
+
+def test_the_settings_line_gives_each_env_its_own_frame_skip():
+    """Table 2's settings line named 5 for every env but Hopper; Walker2d's frame skip is 4. Each family must stand
+    under the frame skip gymnasium gives it, and under the paper's learning rate and demo size for it."""
+    import gymnasium as gym
+
+    from benchmark.paper import paper_settings
+
+    parts = dict(part.split(" ", 1) for part in aggregate.settings_text().split("; "))
+    for family in ("Hopper", "Walker2d", "HalfCheetah", "Ant"):
+        native = gym.make(f"{family}-v4").unwrapped.frame_skip
+        wanted = {"frame_skip": native, **{name: paper_settings(f"{family}-v4")[name] for name in ("learning_rate", "num_demo_samples")}}
+        for name, value in wanted.items():
+            groups = dict(re.fullmatch(r"(\S+) \((.*)\)", group).groups() for group in parts[name].split(" / "))
+            assert family in groups[str(value)].split(", "), (family, name, parts[name])
+    assert parts["history"] == "2" and parts["obs_noise_std"] == "0.2", "a setting shared by every env is given once"
+
+
+@pytest.mark.parametrize("module", sorted(path.stem for path in (REPO_ROOT / "benchmark").glob("*.py")
+                                          if "__main__" in path.read_text()))
+def test_a_benchmark_module_runs_as_a_file_too(module, tmp_path):
+    """`python benchmark/X.py` put benchmark/ first on sys.path, so `from benchmark...` failed with a traceback; the
+    docs use `python -m benchmark.X`, and both now work, from any folder."""
+    result = subprocess.run([sys.executable, str(REPO_ROOT / "benchmark" / f"{module}.py"), "--help"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("usage: "), result.stdout
