@@ -7,7 +7,9 @@ seed's `ms_per_step`: the script's own training-loop time per step, evaluations 
 seeds at once on a 2-core machine, one core each, as the main job does with its default --workers. A seed's training
 time at the paper's protocol on Hopper is that times its steps: 1000 epochs of 20000 // 64 = 312 steps, and for
 DAgger 468,100 (then four rounds of 100 epochs on the growing aggregate). Results without a machine record (made
-before the runners wrote one) are counted, not used: the machine they ran on is unknown.
+before the runners wrote one) are counted, not used: the machine they ran on is unknown. Each row also names the commit
+of the scripts that made its runs (the nearest commit.txt above them, which the grid's runs keep): the scripts' speed
+changed over time (fused Adam, 654be24, made a step about 0.73x as long).
 """
 import json
 import sys
@@ -30,10 +32,21 @@ def machine_name(record: dict) -> str:
     return f"{cpu}, {record['cpu_capability']}" if record.get("cpu_capability") else cpu
 
 
+def commit_of(path: Path, results_dir: Path) -> str:
+    """The short commit in the nearest commit.txt above path, up to results_dir; "unknown" where there is none."""
+    for folder in path.parents:
+        if (folder / "commit.txt").is_file():
+            words = (folder / "commit.txt").read_text().split()
+            return words[0][:7] if words else "unknown"
+        if folder == results_dir:
+            break
+    return "unknown"
+
+
 def collect(results_dir) -> tuple:
-    """({(run, machine): [ms per step of each seed]}, results without a machine record). A run is the folder above the
-    env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it, prefixed by the result's method
-    where the folder does not start with it."""
+    """({(run, machine, commit): [ms per step of each seed]}, results without a machine record). A run is the folder
+    above the env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it, prefixed by the result's
+    method where the folder does not start with it."""
     times, unknown = defaultdict(list), 0
     for path in sorted(Path(results_dir).rglob("result_seeds*.json")):
         try:
@@ -52,7 +65,7 @@ def collect(results_dir) -> tuple:
             continue
         run, method = path.parent.parent.name, str(result.get("method", ""))
         run = run if run.startswith(method) else f"{method}/{run}"  # e.g. ensemble_twins/bc_so: its members' kind
-        times[run, machine_name(result["machine"])].append(ms)
+        times[run, machine_name(result["machine"]), commit_of(path, Path(results_dir))].append(ms)
     return dict(times), unknown
 
 
@@ -64,16 +77,16 @@ def table(times: dict, unknown: int, command: str) -> str:
         "2-core machine, one core each; the minutes are the training of a paper-protocol Hopper seed at those step "
         f"times (312,000 steps; DAgger 468,100). {unknown} results without a machine record are left out.",
         "",
-        "| run | machine | seeds | ms per step | Hopper seed, training |",
-        "|---|---|---:|---:|---:|",
+        "| run | machine | commit | seeds | ms per step | Hopper seed, training |",
+        "|---|---|---|---:|---:|---:|",
     ]
-    for (run, machine), values in sorted(times.items()):
+    for (run, machine, commit), values in sorted(times.items()):
         steps = HOPPER_STEPS.get(run, DEFAULT_STEPS)
         low, high = min(values), max(values)
         ms = f"{low:.2f}" if round(low, 2) == round(high, 2) else f"{low:.2f}–{high:.2f}"
         minutes = [value * steps / 60_000 for value in (low, high)]
         span = f"{minutes[0]:.1f}" if round(minutes[0], 1) == round(minutes[1], 1) else f"{minutes[0]:.1f}–{minutes[1]:.1f}"
-        lines.append(f"| `{run}` | {machine} | {len(values)} | {ms} | {span} min |")
+        lines.append(f"| `{run}` | {machine} | {commit} | {len(values)} | {ms} | {span} min |")
     return "\n".join(lines) + "\n"
 
 

@@ -29,14 +29,18 @@ def test_times_are_grouped_by_run_and_machine_and_priced_at_a_hopper_seeds_steps
     write(tmp_path / "runs/bc_oh/Hopper-v4", 1, 1.0)  # no machine record: counted, left out
     write(tmp_path / "runs/bc_so/Hopper-v4", 1, "fast", AMD)  # not a number: skipped, not a traceback
     (tmp_path / "runs/bc_so/Hopper-v4/result_seeds2.json").write_text("{half")  # half written: skipped
+    (tmp_path / "regimes/x/runs/commit.txt").write_text("969e6af8096e106a197193ab36c155e852d00d86\n")
+    (tmp_path / "regimes/x/runs/dagger/commit.txt").write_text("310975f (runs started 2026-12-06)\n")  # the nearest wins
+    write(tmp_path / "regimes/x/runs/c2f/Hopper-v4", 1, 5.0, AMD)
     times, unknown = seed_times.collect(tmp_path)
-    assert times == {("c2f", "AuthenticAMD AMD EPYC, AVX512"): [2.0, 4.0], ("c2f", "Intel(R) Xeon(R) Processor, AVX512"): [1.0],
-                     ("dagger", "AuthenticAMD AMD EPYC, AVX512"): [1.0], ("ensemble_twins/bc_so", "AuthenticAMD AMD EPYC, AVX512"): [3.0]}
+    assert times == {("c2f", "AuthenticAMD AMD EPYC, AVX512", "unknown"): [2.0, 4.0], ("c2f", "Intel(R) Xeon(R) Processor, AVX512", "unknown"): [1.0],
+                     ("c2f", "AuthenticAMD AMD EPYC, AVX512", "969e6af"): [5.0], ("dagger", "AuthenticAMD AMD EPYC, AVX512", "310975f"): [1.0],
+                     ("ensemble_twins/bc_so", "AuthenticAMD AMD EPYC, AVX512", "unknown"): [3.0]}
     assert unknown == 1
     rows = seed_times.table(times, unknown, "cmd").splitlines()
-    assert "| `c2f` | AuthenticAMD AMD EPYC, AVX512 | 2 | 2.00–4.00 | 10.4–20.8 min |" in rows  # 312,000 steps
-    assert "| `c2f` | Intel(R) Xeon(R) Processor, AVX512 | 1 | 1.00 | 5.2 min |" in rows
-    assert "| `dagger` | AuthenticAMD AMD EPYC, AVX512 | 1 | 1.00 | 7.8 min |" in rows  # 468,100 steps
+    assert "| `c2f` | AuthenticAMD AMD EPYC, AVX512 | unknown | 2 | 2.00–4.00 | 10.4–20.8 min |" in rows  # 312,000 steps
+    assert "| `c2f` | Intel(R) Xeon(R) Processor, AVX512 | unknown | 1 | 1.00 | 5.2 min |" in rows
+    assert "| `dagger` | AuthenticAMD AMD EPYC, AVX512 | 310975f | 1 | 1.00 | 7.8 min |" in rows  # 468,100 steps
     assert "1 results without a machine record are left out" in rows[2]
 
 
