@@ -97,7 +97,7 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """C2F as the paper draws it (section 8.3, Fig. 10): coarse model pi_phi, policy pi_theta."""
+    """C2F on MuJoCo (section 8.3, Fig. 10): coarse model pi_phi, policy pi_theta."""
 
     def __init__(self, obs_dim: int, act_dim: int, history: int, hidden: int, inputs: torch.Tensor):
         super().__init__()

@@ -131,7 +131,7 @@ class Normalizer(nn.Module):
 
 
 class Policy(nn.Module):
-    """C2F as the paper draws it (section 8.3, Fig. 10), with the ablations of Table 3 open."""
+    """C2F on MuJoCo (section 8.3, Fig. 10), with the ablations of Table 3 open."""
 
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()

@@ -546,7 +546,7 @@ class OHPolicy(nn.Module):
 
 # Copied from c2f_table3.Policy with Policy->C2FPolicy
 class C2FPolicy(nn.Module):
-    """C2F as the paper draws it (section 8.3, Fig. 10), with the ablations of Table 3 open."""
+    """C2F on MuJoCo (section 8.3, Fig. 10), with the ablations of Table 3 open."""
 
     def __init__(self, obs_dim: int, act_dim: int, inputs: torch.Tensor, args):
         super().__init__()

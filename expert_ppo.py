@@ -83,7 +83,7 @@ class Args:
     make_demos: bool = False
     """roll --checkpoint out into ./demos/<env>[_fs<K>]_<N>.npz (kept if this expert made it)"""
     num_demo_samples: int | None = None
-    """with --make-demos: demo steps; None: 20000 for Hopper, 10000 otherwise (section 8.3)"""
+    """with --make-demos: steps; None: 20000 for Hopper, 10000 otherwise (8.3; HalfCheetah: ours)"""
     retarget: bool = False
     """with --eval-only: --checkpoint may be made for another version of --env (v4 for v5)"""
 

@@ -10,7 +10,8 @@ Each panel is one policy, rebuilt as scripts/evaluate.py rebuilds it, playing th
 under the partial observability and control rate its checkpoint records); its method and running
 return are written on it, and a panel whose episode has ended holds its last frame. All
 checkpoints must be of one env at one frame skip. A frame is drawn every --every steps (default:
-every 1/25 s of simulated time, so the GIF plays in real time). Rendering needs OpenGL: the script
+every 1/25 s of simulated time, or every step where a step is longer, so the GIF plays in real
+time). Rendering needs OpenGL: the script
 uses MUJOCO_GL if set, else the first of egl (a GPU driver) and osmesa
 (`apt-get install libosmesa6`) that renders here. Needs only pillow (requirements.txt's
 matplotlib brings it).
@@ -196,7 +197,7 @@ def play(panels: list, paths: list, output: Path, max_steps: int, every) -> dict
             names.append(method)
         else:
             names.append(f"{method} {Path(path).stem}")
-    # By default, draw a frame every 1/25 s of simulated time.
+    # By default, draw a frame every 1/25 s of simulated time (every step where a step is longer).
     every = every or max(1, round(0.04 / panels[0].dt))
     # Keep per panel its last picture and its step then: an ended episode's is not drawn again.
     last = [(None, -1)] * len(panels)
@@ -262,7 +263,7 @@ def main(argv=None):
     parser.add_argument(
         "--every",
         type=positive,
-        help="draw a frame every N steps (default: every 1/25 s of simulated time)",
+        help="draw a frame every N steps (default: every 1/25 s of simulated time, or every step)",
     )
     parser.add_argument(
         "--width", type=positive, default=320, help="width of a panel in pixels (default 320)"
