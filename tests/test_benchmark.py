@@ -462,6 +462,8 @@ def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_t
         script_at("no-such-commit", "c2f", tmp_path)
     with pytest.raises(UsageError, match="unknown script nothing.py"):
         step_time.main(["--scripts", "nothing"])
+    with pytest.raises(UsageError, match="--env-now 'MKL_CBWR' is not VAR=VALUE"):
+        step_time.main(["--env-now", "MKL_CBWR"])
     with pytest.raises(UsageError, match="must be positive"):
         main_job_time.main(["--repeats", "0"])
 
@@ -492,3 +494,21 @@ def test_a_benchmark_module_runs_as_a_file_too(module, tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("usage: "), result.stdout
+
+
+def test_step_time_gives_env_now_to_todays_runs_alone(tmp_path):
+    """--env-now (e.g. MKL_CBWR=COMPATIBLE with --baseline HEAD) must reach the runs of today's scripts and not the
+    baseline's: start() adds it to a run's environment; a script standing in for a method file reports it."""
+    from benchmark import step_time
+
+    script = tmp_path / "reports_env.py"
+    script.write_text(
+        "import json, os, sys\n"
+        "out = sys.argv[sys.argv.index('--output-dir') + 1]\n"
+        "os.makedirs(out, exist_ok=True)\n"
+        "ms = float(os.environ.get('STEP_TIME_TEST_MS', '1'))\n"
+        "open(os.path.join(out, 'result_seeds1.json'), 'w').write(json.dumps({'scores': {'1': {'ms_per_step': ms}}}))\n")
+    baseline = step_time.start(script, 1, tmp_path / "baseline", False, {})
+    now = step_time.start(script, 1, tmp_path / "now", False, {"STEP_TIME_TEST_MS": "2.5"})
+    assert step_time.ms_per_step(baseline, tmp_path / "baseline") == 1.0
+    assert step_time.ms_per_step(now, tmp_path / "now") == 2.5
