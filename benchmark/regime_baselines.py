@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import aggregate, fca_compare, regime_summary
 from benchmark.paper import METHOD_NAMES
-from benchmark.regimes import REGIMES, RESULTS_DIR, runs_dir
+from benchmark.regimes import REGIMES, RESULTS_DIR, existing_runs_dir, runs_dir
 from benchmark.results import EXPERT, OneLineParser, UsageError, run_cli, write_text
 from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
 from benchmark.table3 import commits_text, comparison, interval_text, machines_text, scores_of, seed_ranges
@@ -326,8 +326,7 @@ def main(argv=None) -> int:
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"the regime map, with the baselines and controls (default {RESULTS_DIR})")
     parser.add_argument("--expert-runs", type=Path, default=Path("results/runs"), help="holds expert/<env>/result_seeds0.json (default results/runs)")
     args = parser.parse_args(argv)
-    if not runs_dir(REGIME, args.results_dir).is_dir():
-        raise UsageError(f"no {runs_dir(REGIME, args.results_dir)}: run python -m benchmark.regimes --regimes {REGIME} first, or pass --results-dir")
+    existing_runs_dir(REGIME, args.results_dir)
     cells, problems = gather(args.results_dir)
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, ENVS)
     problems += expert_problems

@@ -41,6 +41,14 @@ def runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
     return Path(results_dir) / regime / "runs"
 
 
+def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
+    """runs_dir(regime, results_dir), refused in one line when the regime has not been run there."""
+    folder = runs_dir(regime, results_dir)
+    if not folder.is_dir():
+        raise UsageError(f"no {folder}: run python -m benchmark.regimes --regimes {regime} first, or pass --results-dir")
+    return folder
+
+
 def scripts_commit(scripts_dir: Path) -> str:
     """The commit of the scripts folder, refused when its tracked files have changes (not reproducible)."""
     def git(*words):

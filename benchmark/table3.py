@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import aggregate, regime_summary
 from benchmark.paper import PAPER_TABLE3, as_flags, variant_flags
-from benchmark.regimes import REGIMES, RESULTS_DIR, recorded_commit, runs_dir
+from benchmark.regimes import REGIMES, RESULTS_DIR, existing_runs_dir, recorded_commit, runs_dir
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
 
@@ -309,8 +309,7 @@ def main(argv=None) -> int:
     parser.add_argument("--replication-dir", type=Path, default=REPLICATION_DIR, help=f"C2F and BC-OH seeds 6-10 (default {REPLICATION_DIR})")
     parser.add_argument("--expert-runs", type=Path, default=Path("results/runs"), help="holds expert/<env>/result_seeds0.json (default results/runs)")
     args = parser.parse_args(argv)
-    if not runs_dir(REGIME, args.results_dir).is_dir():
-        raise UsageError(f"no {runs_dir(REGIME, args.results_dir)}: run python -m benchmark.regimes --regimes {REGIME} first, or pass --results-dir")
+    existing_runs_dir(REGIME, args.results_dir)
     records, replication, problems = gather(args.results_dir, args.replication_dir)
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, [ENV])
     problems += expert_problems
