@@ -171,7 +171,11 @@ def train(args: Args):
     # None becomes the env's own frame skip here, so that args and checkpoints record the rate used.
     args.frame_skip = env_frame_skip(args.env, args.frame_skip)
     rate = "" if args.frame_skip == native else f"_fs{args.frame_skip}"
-    output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
+    try:
+        output_dir = args.output_dir.format(env=args.env, seed=args.seed, rate=rate)
+        os.makedirs(output_dir, exist_ok=True)
+    except (KeyError, IndexError, ValueError, OSError) as error:
+        raise UsageError(f"cannot make --output-dir {args.output_dir} ({error!r}): pass another")
     latest_path = os.path.join(output_dir, "latest.pt")
     best_path = os.path.join(output_dir, "best.pt")
     torch.manual_seed(args.seed)
@@ -674,10 +678,6 @@ def make_demos(args: Args):
     if isinstance(made, dict) and all(made.get(key) == meta[key] for key in settings):
         print(f"{path}: already made from {expert_path} with these settings")
         return
-    # No evaluated return (e.g. a mid-run latest.pt): drop it and the rate it was measured at.
-    if meta["expert_return"] is None:
-        del meta["expert_return"]
-        del meta["expert_frame_skip"]
     # One thread, as when the shipped demos were made: the same digits.
     torch.set_num_threads(1)
     print(f"generating {num_samples} demonstration steps with {expert_path} -> {path}")

@@ -155,6 +155,18 @@ def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkey
     assert not (tmp_path / "run").exists()  # failed before training started
 
 
+@pytest.mark.parametrize("output_dir, problem", [("a_file", "FileExistsError("), ("a_file/sub", "NotADirectoryError("),
+                                                  ("runs/{name}", "KeyError('name')")], ids=["a-file", "under-a-file", "unknown-field"])
+def test_an_output_dir_that_cannot_be_made_is_refused_before_training(output_dir, problem, tmp_path, monkeypatch):
+    """A file in the way raised at the first checkpoint, after training had run; a field other than {env}, {seed} and
+    {rate} raised in str.format. Both are refused in one line before the first rollout."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a_file").write_text("")
+    result = run_in_process("expert_ppo.py", "--output-dir", output_dir, "--max-minutes", 0.01)
+    assert_usage_error(result, f"cannot make --output-dir {output_dir} ({problem}")
+    assert result.returncode == 2 and result.stdout == "", "refused before anything else happens"
+
+
 def test_a_negative_time_limit_is_refused():
     """(The test above passes --max-minutes itself.) A negative limit stopped after the first rollout."""
     with pytest.raises(expert_ppo.UsageError, match=r"^--max-minutes must lie in \[0, inf\), got -1.0$"):
