@@ -1,20 +1,23 @@
 # Causal diagnostics of the copycat shortcut for saved BC-SO, BC-OH and C2F models
-# (paper section 5.4, H3); see README.md
+# (the paper's H3: section 5.4's interventions; the summaries below are ours); see README.md
 """Interventions that show whether a policy copies the previous action instead of reading the
 current frame.
 
 Loads the models that bc_so.py, bc_oh.py and c2f.py write with --save-model for one env (C2F's
 may also be c2f_table3.py's, with --coarse-output action) and, on held-out expert demonstrations
-(with fresh velocity noise) and on each policy's own rollouts in the noisy env, measures
+(velocity noise drawn from --seed: for seed-1 models the same draws as their training noise, on
+other steps) and on each policy's own rollouts in the noisy env, measures
 
 1. do(o_hist) = [o_t, ..., o_t]: how far each policy's action moves when its history is replaced
    by the current frame repeated (mean |change| per action dim / the demo actions' std), and how
-   often the real history pulls the action towards the previous action a_{t-1};
+   often the real history pulls the action towards the previous action a_{t-1} (ours: section 5.4
+   counts how often the intervention turns CARLA's accelerate into stop);
 2. do(zeta), C2F only:
    CE_d = |pi_theta(o_hist, do(zeta_d = lo_d))_d - pi_theta(o_hist, do(zeta_d = hi_d))_d|
    per action dim d, the other zeta dims left at the coarse model's output, lo_d / hi_d the
    5th / 95th percentiles of the demo actions;
-3. the copycat score on held-out demos: at action changepoints (top decile of |a_t - a_{t-1}|),
+3. the copycat score on held-out demos (ours; its changepoints are those of Wen et al. 2021, the
+   KeyFrame baseline): at action changepoints (the top decile of the std-scaled |a_t - a_{t-1}|),
    the fraction of predictions closer to a_{t-1} than to a_t.
 
 It prints a table and writes the pictures and a JSON report to --output-dir.
@@ -49,7 +52,7 @@ import tyro
 # still comes before any figure is made.
 matplotlib.use("Agg")
 
-# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+# Our v4 envs are deprecated in gymnasium 1.x (the paper names no version): keep stderr for errors.
 gym.logger.min_level = gym.logger.ERROR
 
 
@@ -104,7 +107,7 @@ class Args:
     """held-out demo steps to generate when --demos is not given"""
     obs_noise_std: Optional[float] = None
     """std of the velocity noise on the demos' and the rollouts' observations (default: the models'
-    training value)"""
+    training value; models trained with --hide-velocities get zeroed velocities instead)"""
     history: Optional[int] = None
     """frames in the history (default: the models'; it must be the BC-OH and C2F models' own)"""
     eval_episodes: int = 3
@@ -113,8 +116,8 @@ class Args:
     """do(zeta_d) = lo_d / hi_d: the q and 1-q quantiles of the demo actions of dim d (0: their min
     and max)"""
     changepoint_quantile: float = 0.9
-    """changepoints of the copycat score: the steps whose |a_t - a_{t-1}| is above this quantile
-    (0.9: the top decile)"""
+    """changepoints of the copycat score: the steps whose std-scaled |a_t - a_{t-1}| is at or
+    above this quantile (0.9: the top decile)"""
     output_dir: str = "analysis/{env}"
     """where the pictures and the JSON report are written"""
     seed: int = 1
@@ -636,12 +639,14 @@ def load_model(
     control: the model of --control, a c2f_table3.py model trained with --no-coarse-action."""
     flag = "--" + method.replace("_", "-")
     script = f"{method}.py"
+    what = f"{method} model"
     accepted = (method,)
     if method == "c2f":
         accepted = C2F_METHODS
     if control:
         flag = "--control"
         script = "c2f_table3.py"
+        what = "capacity control"
     if not os.path.isfile(path):
         folder, name = os.path.split(path)
         seed = "1"
@@ -651,8 +656,10 @@ def load_model(
         if control:
             train += " --no-coarse-action"
         train += f" --save-model --output-dir {folder or '.'}"
+        writes = os.path.join(folder, f"seed{seed}.pt")
         raise UsageError(
-            f"{method} model {path} not found: train one with `{train}`, or pass {flag} PATH"
+            f"{what} {path} not found: train one with `{train}` (it writes {writes}), "
+            f"or pass {flag} PATH"
         )
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)

@@ -571,7 +571,7 @@ def print_mujoco_warning(text: str):
         print(f"MuJoCo warning: {text}", file=sys.stderr)
 
 
-# The paper's v4 envs are deprecated in gymnasium 1.x: keep stderr for errors.
+# Our v4 envs are deprecated in gymnasium 1.x (the paper names no version): keep stderr for errors.
 gym.logger.min_level = gym.logger.ERROR
 mujoco.set_mju_user_warning(print_mujoco_warning)
 

@@ -308,7 +308,11 @@ def test_missing_model(saved, monkeypatch):
     assert "bc_oh model nowhere/seed1.pt not found" in message and "--save-model" in message
     message = bad_run(*saved, monkeypatch, control="nowhere/seed1.pt")
     train = "`python c2f_table3.py --env Hopper-v4 --seeds 1 --no-coarse-action --save-model --output-dir nowhere`"
-    assert "c2f model nowhere/seed1.pt not found" in message and f"{train}, or pass --control PATH" in message
+    assert "capacity control nowhere/seed1.pt not found" in message
+    assert f"{train} (it writes nowhere/seed1.pt), or pass --control PATH" in message
+    # A name other than seed<S>.pt: the command writes seed1.pt into its folder, and says so.
+    message = bad_run(*saved, monkeypatch, control="nowhere/model.pt")
+    assert "--output-dir nowhere` (it writes nowhere/seed1.pt), or pass --control PATH" in message
 
 
 def test_c2f_models_of_either_file_load_with_the_table3_defaults(saved, tmp_path):
