@@ -1003,6 +1003,8 @@ def run(args):
     act_dim = env.action_space.shape[0]
     low = env.action_space.low
     high = env.action_space.high
+    # An env without a known velocity layout is refused here, before a model's advice to train one.
+    dims = velocity_dims(env, args.env)
     models = {}
     saved = {}
     paths = {method: getattr(args, method).format(env=args.env) for method in METHODS}
@@ -1015,7 +1017,6 @@ def run(args):
         models[CONTROL], saved[CONTROL] = load_model(
             paths[CONTROL], "c2f", args.env, obs_dim, act_dim, control=True
         )
-    dims = velocity_dims(env, args.env)
     for method, training in saved.items():
         # Models made with the old --velocity-dims recorded where their noise went.
         recorded = training.get("velocity_dims")

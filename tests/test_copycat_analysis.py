@@ -407,3 +407,12 @@ def test_models_of_another_control_rate_and_hidden_velocities_are_analysed_at_th
             ca.run(ca.Args(**{**{m: str(p) for m, p in paths.items()}, "bc_so": "models/native/seed1.pt"}, num_demo_samples=300, eval_episodes=1))
     finally:
         os.chdir(cwd)
+
+
+def test_an_env_without_a_velocity_layout_is_refused_before_the_models(tmp_path, monkeypatch):
+    """Swimmer-v4 has no known velocity entries: the refusal says so, where it advised training a model with
+    `python bc_so.py --env Swimmer-v4`, which bc_so.py refuses for the same reason."""
+    monkeypatch.chdir(tmp_path)
+    result = run_in_process("copycat_analysis.py", "--env", "Swimmer-v4")
+    assert_usage_error(result, "the velocity entries of Swimmer-v4 are unknown")
+    assert "train one" not in result.stderr
