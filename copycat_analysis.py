@@ -402,11 +402,18 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
         try:
             return load_demos(given, env)[0]
         except UsageError as error:
-            # Its fix "pass --frame-skip K" is the method files': here the models set the rate.
-            message, rate_fix, _ = str(error).partition(": pass --frame-skip")
-            if rate_fix:
+            # The method files' fixes name their own flags: here the models set the env and the
+            # rate, and a file of two steps or more will do.
+            message = str(error)
+            if ": pass --frame-skip" in message:
+                problem = message.partition(": pass --frame-skip")[0]
                 fix = f"the models' rate: pass --demos made at frame skip {rate}"
-                raise UsageError(f"{message}, {fix}")
+                raise UsageError(f"{problem}, {fix}")
+            if ": pass --env" in message:
+                problem = message.partition(": pass --env")[0]
+                raise UsageError(f"{problem}: pass --demos of {args.env}, the models' env")
+            if "use a smaller --batch-size" in message:
+                raise UsageError(f"{args.demos} holds one step: pass --demos of two steps or more")
             raise
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):

@@ -294,7 +294,17 @@ BAD_DEMOS = {
     "another rate": (lambda tmp: make_demos("Hopper-v4", 300, 1),
                      "was made at frame skip 1 (the env's own if its meta has none), not 4, the models' rate: pass --demos made at frame skip 4"),
     "a non-finite value": (with_nan_at_row_17, "observations hold non-finite values at rows [17]: fix them"),
+    # The method files' fixes ("pass --env Walker2d-v4", "use a smaller --batch-size") are no flags of this script.
+    "another env": (lambda tmp: make_demos("Walker2d-v4", 300), "holds demos of Walker2d-v4: pass --demos of Hopper-v4, the models' env"),
+    "one step": (lambda tmp: one_step(tmp), "one_step.npz holds one step: pass --demos of two steps or more"),
 }
+
+
+def one_step(tmp_path):
+    with np.load(make_demos("Hopper-v4", 300)) as data:
+        arrays = {key: data[key][:1] for key in ("observations", "actions", "episode_starts")}
+    np.savez(tmp_path / "one_step.npz", **arrays)
+    return tmp_path / "one_step.npz"
 
 
 @pytest.mark.parametrize("case", list(BAD_DEMOS))
