@@ -60,7 +60,7 @@ ROWS = [
     ("bc_so", "BC-SO", None, "(reference)"),
 ]
 """(runner variant, Table 3's row name, the declared rule its verdict follows or None, the prediction as declared),
-in the paper's row order, then the two references"""
+in the declaration's order (the paper lists early fusion before middle), then the two references"""
 METHODS = [method for method, *_ in ROWS]
 NAMES = {method: name for method, name, *_ in ROWS}
 SHORT_NAMES = {"c2f": "C2F", "c2f_no_coarse": "no-coarse control", "c2f_penultimate": "penultimate fusion", "bc_oh": "BC-OH"}
