@@ -377,7 +377,7 @@ def load_demos(args, env: gym.Env) -> tuple:
     actions = actions[:take]
     starts = starts[:take]
     for key, values in [("observations", obs), ("actions", actions)]:
-        bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
+        bad_rows = np.flatnonzero(~(np.abs(values) <= np.finfo(np.float32).max).all(axis=1))
         if len(bad_rows):
             rows = bad_rows[:3].tolist()
             raise UsageError(f"{path}: {key} hold non-finite values at rows {rows}: fix them")

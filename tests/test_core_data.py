@@ -234,11 +234,13 @@ def test_demos_of_any_real_dtype_are_converted(tmp_path):
     assert noisy.dtype == np.float64
 
 
-@pytest.mark.parametrize("key, row, column", [("observations", 17, 4), ("actions", 150, 2)])
-def test_a_non_finite_demo_value_is_refused_with_its_row(tmp_path, key, row, column):
+@pytest.mark.parametrize("key, row, column, value", [("observations", 17, 4, np.nan), ("actions", 150, 2, np.nan),
+                                                     ("observations", 30, 0, 1e39), ("observations", 31, 1, -np.inf)])
+def test_a_non_finite_demo_value_is_refused_with_its_row(tmp_path, key, row, column, value):
+    """1e39 is finite in the file's float64 but not in the float32 that training reads (it would train on inf)."""
     rng = np.random.default_rng(0)
     values = rng.uniform(-1, 1, size=(200, 11 if key == "observations" else 3))  # within the action bounds
-    values[row, column] = np.nan
+    values[row, column] = value
     with pytest.raises(bc_oh.UsageError, match=rf"user.npz: {key} hold non-finite values at rows \[{row}\]: fix them$"):
         load_user_demos(user_demo_file(tmp_path, **{key: values}))
 
