@@ -122,6 +122,10 @@ def load_policy(path):
     --save-model."""
     checkpoint = read_checkpoint(path)
     method = checkpoint["method"]
+    # c2f.py held Table 3's settings until c2f_table3.py took them (issue 55). Its older models
+    # (the shipped results/h3 ones) record them: c2f_table3.py, c2f.py at its defaults, loads them.
+    if method == "c2f" and "fusion" in checkpoint["args"]:
+        method = "c2f_table3"
     module = method_module(method, path)
     try:
         args = saved_args(module, checkpoint, path)

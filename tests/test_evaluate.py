@@ -93,6 +93,17 @@ def test_a_checkpoint_from_before_expert_and_cuda_graph_went_plays_the_same_epis
     assert evaluate(older, "--episodes", 2, "--seed", 7)[1] == evaluate(path, "--episodes", 2, "--seed", 7)[1]
 
 
+def test_a_c2f_model_saved_before_c2f_table3_existed_plays_with_c2f_table3():
+    """c2f.py held Table 3's settings before issue 55 moved them to c2f_table3.py; its models (the shipped results/h3
+    ones, which the README's watch command plays) record them. c2f_table3.py, c2f.py at its defaults, loads them (every
+    weight: load_state_dict is strict) and plays as trained: the README's episode, --seed 0, returned 546 on AMD EPYCs
+    (a BC-OH policy after one epoch scores about 10); the bound leaves room for another CPU's digits."""
+    shipped = REPO_ROOT / "results" / "h3" / "native_hidden" / "runs" / "c2f" / "Hopper-v4" / "seed1.pt"
+    result, returns = evaluate(shipped, "--episodes", 1, "--seed", 0)
+    assert result.stdout.splitlines()[-1].startswith("Hopper-v4 c2f_table3: ")
+    assert returns[0] > 300, returns
+
+
 def damaged(path, tmp_path):
     (tmp_path / "damaged.pt").write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     return tmp_path / "damaged.pt"
