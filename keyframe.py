@@ -579,6 +579,8 @@ def run(args):
         os.makedirs(output_dir, exist_ok=True)
     except OSError as error:
         raise UsageError(f"cannot make {output_dir} ({error.strerror}): pass another --output-dir")
+    if not os.access(output_dir, os.W_OK):
+        raise UsageError(f"cannot write in {output_dir}: pass another --output-dir")
 
     workers = min(args.workers or len(args.seeds), len(args.seeds))
     if args.cuda:

@@ -145,6 +145,20 @@ def test_an_output_dir_that_cannot_be_made_is_refused_in_one_line(tmp_path):
         assert_usage_error(result, f"cannot make {output_dir} ({problem}): pass another --output-dir")
 
 
+def test_an_output_dir_that_cannot_be_written_is_refused_before_training(tmp_path, monkeypatch):
+    """A read-only folder (a read-only mount; chmod does not stop root) trained every seed, then raised at the first
+    result file. The OS's answer is played here by os.access, which the check asks."""
+    rng = np.random.default_rng(0)
+    path = write_demos(tmp_path / "demos.npz", rng.normal(size=(100, 11)), rng.uniform(-1, 1, (100, 3)), np.arange(100) % 50 == 0)
+    read_only = tmp_path / "read_only"
+    read_only.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda where, mode: real_access(where, mode) and Path(where) != read_only)
+    result = run_in_process("bc_oh.py", "--demos", path, "--output-dir", read_only, "--epochs", 1)
+    assert_usage_error(result, f"cannot write in {read_only}: pass another --output-dir")
+    assert "seed 1 | training" not in result.stdout
+
+
 def write_demos(path, observations, actions, starts):
     np.savez(path, observations=observations, actions=actions, episode_starts=starts)
     return path
