@@ -34,6 +34,7 @@ It prints a table and writes the pictures and a JSON report to --output-dir.
 
 import json
 import os
+import signal
 import sys
 from dataclasses import asdict, dataclass
 from types import SimpleNamespace
@@ -1219,11 +1220,16 @@ def run(args):
 
 
 if __name__ == "__main__":
+    # `kill PID` stops the analysis as Ctrl-C does.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         run(tyro.cli(Args))
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)
     except OSError as error:
         # A path that cannot be written: a folder, or a file in the way.
         problem = f"cannot use {error.filename}: {error.strerror}"

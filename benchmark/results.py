@@ -10,6 +10,7 @@ import contextlib
 import json
 import math
 import os
+import signal
 import statistics
 import sys
 from pathlib import Path
@@ -34,12 +35,17 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def run_cli(main):
-    """Call main(); turn a UsageError into one line on stderr and exit status 2."""
+    """Call main(); turn a UsageError into one line on stderr and exit status 2, and Ctrl-C or `kill` into one line
+    and exit status 130 (what main holds in `with` blocks, temporary folders and child processes, is cleaned up)."""
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill PID` stops it as Ctrl-C does
     try:
         sys.exit(main())
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)
     except BrokenPipeError:  # output piped into `head` that stopped reading: end quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so the exit-time flush cannot fail
         sys.exit(1)
@@ -47,6 +53,8 @@ def run_cli(main):
         path = error.filename2 or error.filename  # os.replace(tmp, path) names the path second
         print(f"error: cannot use {path}: {error.strerror or error}: pass another path", file=sys.stderr)
         sys.exit(2)
+    finally:
+        signal.signal(signal.SIGTERM, previous)  # a caller in this process (a test) keeps its own
 
 
 def result_path(results_dir, method: str, env: str, seeds) -> Path:

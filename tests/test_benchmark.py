@@ -3,6 +3,7 @@ refusals), with a stand-in method script that writes its result instantly: no re
 import json
 import os
 import re
+import signal
 import statistics
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import pytest
 from conftest import REPO_ROOT, assert_usage_error, plant, run_module
 
 from benchmark import aggregate, run_grid
-from benchmark.results import ResultError, UsageError, make_result, read_result, result_path
+from benchmark.results import ResultError, UsageError, make_result, read_result, result_path, run_cli
 
 DEMO_FILE = '''
 def demo_file(env, frame_skip, num_samples):
@@ -512,3 +513,23 @@ def test_step_time_gives_env_now_to_todays_runs_alone(tmp_path):
     now = step_time.start(script, 1, tmp_path / "now", False, {"STEP_TIME_TEST_MS": "2.5"})
     assert step_time.ms_per_step(baseline, tmp_path / "baseline") == 1.0
     assert step_time.ms_per_step(now, tmp_path / "now") == 2.5
+
+
+def test_ctrl_c_or_kill_ends_a_tool_in_one_line(capsys):
+    """The tools' run_cli (evaluate.py, watch.py, every benchmark module): Ctrl-C printed a traceback of tens of lines,
+    and `kill` printed nothing and left step_time's and fingerprint's temporary folders behind. `kill` now raises
+    Ctrl-C's KeyboardInterrupt inside main (so `with` blocks clean up), and both end in one line, exit status 130;
+    the caller's own SIGTERM handler comes back."""
+    handler_before = signal.getsignal(signal.SIGTERM)
+    seen = []
+
+    def interrupted_main():
+        seen.append(signal.getsignal(signal.SIGTERM))
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit:
+        run_cli(interrupted_main)
+    assert exit.value.code == 130
+    assert capsys.readouterr().err == "interrupted\n"
+    assert seen == [signal.default_int_handler]
+    assert signal.getsignal(signal.SIGTERM) is handler_before
