@@ -383,10 +383,14 @@ def recorded_evaluation(record: dict) -> str:
 
 
 def read_record(path) -> dict:
+    """A record this module wrote: a JSON object with at least one stage (an empty one would compare as "the same")."""
     try:
-        return json.loads(Path(path).read_text())
+        record = json.loads(Path(path).read_text())
     except (OSError, ValueError) as error:
         raise UsageError(f"cannot read the record {path}: {error}")
+    if not isinstance(record, dict) or not any(stage in record for stage in STAGES):
+        raise UsageError(f"{path} is not a fingerprint record (none of {', '.join(STAGES)}): pass one this module wrote")
+    return record
 
 
 def main(argv=None) -> int:

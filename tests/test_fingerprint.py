@@ -164,6 +164,15 @@ def test_compare_of_two_stored_records_runs_nothing(tmp_path, capsys):
     assert capsys.readouterr().out.startswith("first stage that differs: weights")
 
 
+@pytest.mark.parametrize("content", ["{}", "[1]"])
+def test_compare_refuses_a_file_that_is_not_a_record(tmp_path, content):
+    """An empty JSON object compared as "the same at every stage compared ()", and a list raised AttributeError."""
+    (tmp_path / "a.json").write_text(json.dumps(RECORD))
+    (tmp_path / "b.json").write_text(content)
+    with pytest.raises(fingerprint.UsageError, match=r"b.json is not a fingerprint record \(none of demos, weights, evaluations\)"):
+        fingerprint.main(["--compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
+
+
 def test_the_stored_amd_epyc_record_is_the_pins_bit_for_bit():
     """The record made on an AMD EPYC (Zen 4) with fused Adam, the CPU and the code the pins were recorded with
     (issue 56): its run prints the pinned epoch lines and evaluations exactly."""
