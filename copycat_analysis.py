@@ -1000,6 +1000,15 @@ def check_args(args):
             "--seed 0 would regenerate the training demonstrations: "
             "use another seed for held-out demos"
         )
+    # The paths may name the env as {env}; another field failed in str.format, after the analysis.
+    for name in ["bc_so", "bc_oh", "c2f", "control", "expert", "output_dir"]:
+        template = getattr(args, name)
+        try:
+            if template is not None:
+                template.format(env=args.env)
+        except (KeyError, IndexError, ValueError):
+            flag = f"--{name.replace('_', '-')}"
+            raise UsageError(f"{flag} {template}: the one field a path may hold is {{env}}")
 
 
 def run(args):

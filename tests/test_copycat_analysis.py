@@ -387,6 +387,9 @@ def test_bad_values(saved, monkeypatch):
     assert "--zeta-quantile" in bad_run(*saved, monkeypatch, zeta_quantile=0.5)
     # gymnasium refused a negative reset seed with a traceback.
     assert "--seed must lie in [0, 2**32), got -1" in bad_run(*saved, monkeypatch, seed=-1)
+    # A field other than {env} in a path raised KeyError in str.format, after the whole analysis.
+    assert bad_run(*saved, monkeypatch, output_dir="out{x}") == "--output-dir out{x}: the one field a path may hold is {env}"
+    assert bad_run(*saved, monkeypatch, expert="experts/{0}.pt").startswith("--expert experts/{0}.pt: the one field")
 
 
 def test_models_of_different_history_lengths_are_refused():
