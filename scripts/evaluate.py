@@ -82,6 +82,11 @@ def read_checkpoint(path) -> dict:
 
 def method_module(method: str, path):
     """The method file ROOT/<method>.py, imported (the method files are self-contained modules)."""
+    if (ROOT / "benchmark" / f"{method}.py").is_file():
+        # A benchmark module's variant (ensemble_twins): not a method file this script can import.
+        raise UsageError(
+            f"{path} was saved by benchmark/{method}.py, whose models this script does not replay"
+        )
     if not (ROOT / f"{method}.py").is_file():
         raise UsageError(
             f"{path} was saved by {method}.py, which is not in {ROOT}: "

@@ -123,6 +123,8 @@ def edited(path, tmp_path, **changes):
 REFUSED = {
     "damaged": (damaged, "damaged.pt is not a readable checkpoint (RuntimeError): the file is damaged"),
     "missing method file": (lambda path, tmp: edited(path, tmp, method="gail"), "was saved by gail.py, which is not in"),
+    # It was told to find "a checkout that has ensemble_twins.py": every checkout has it, in benchmark/.
+    "a benchmark variant": (lambda path, tmp: edited(path, tmp, method="ensemble_twins"), "was saved by benchmark/ensemble_twins.py, whose models this script does not replay"),
     "an expert": (lambda path, tmp: REPO_ROOT / "experts" / "Hopper-v4.pt", "is not a model saved with --save-model: it has no 'method' (an expert"),
     "a JSON result": (lambda path, tmp: path.with_name("result_seeds1.json"), "is not a readable checkpoint"),
     "not found": (lambda path, tmp: tmp / "nowhere.pt", "not found: pass a seed<S>.pt that a method file wrote with --save-model"),
