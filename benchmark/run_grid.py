@@ -123,9 +123,11 @@ def check_options(options: Options):
 
     for env in options.envs:
         try:
-            gymnasium.spec(env)
+            spec = gymnasium.spec(env)
         except Exception:
             raise UsageError(f"unknown env {env!r}: use a gymnasium MuJoCo id such as Hopper-v4")
+        if "mujoco" not in str(spec.entry_point):  # the advice to train an expert would lead to a refusal
+            raise UsageError(f"{env} is not a MuJoCo env: the method files imitate MuJoCo envs, e.g. Hopper-v4")
     needs_expert = EXPERT in options.methods or "demos" not in explicit_settings(options.extra_args)
     for env in options.envs:
         if needs_expert and not (options.scripts_dir / "experts" / f"{env}.pt").is_file():
@@ -134,6 +136,8 @@ def check_options(options: Options):
         raise UsageError(f"--workers and --expert-episodes must be at least 1, got {options.workers} and {options.expert_episodes}")
     if len(set(options.seeds)) != len(options.seeds):
         raise UsageError(f"--seeds lists a seed twice: {' '.join(map(str, options.seeds))}")
+    if min(options.seeds) < 0 or max(options.seeds) >= 2**32:  # as the method files refuse them, before the grid
+        raise UsageError(f"--seeds must lie in [0, 2**32), got {' '.join(map(str, options.seeds))}")
     for name in explicit_settings(options.extra_args):
         if name in SET_BY_RUNNER:
             raise UsageError(f"--extra-args sets --{name.replace('_', '-')}, which the runner sets for each combination: leave it out")

@@ -301,6 +301,11 @@ def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
 @pytest.mark.parametrize("args, expected", [
     (["--methods", "bc_oh", "nope", "--envs", "Hopper-v4"], "unknown method 'nope': choose from"),
     (["--methods", "bc_oh", "--envs", "Hopper-v4", "Nope-v4"], "unknown env 'Nope-v4'"),
+    # It was told to train an expert for these, which expert_ppo.py (CartPole) or the method files (Pendulum) refuse.
+    (["--methods", "bc_oh", "--envs", "CartPole-v1"], "CartPole-v1 is not a MuJoCo env: the method files imitate MuJoCo envs"),
+    (["--methods", "bc_oh", "--envs", "Pendulum-v1"], "Pendulum-v1 is not a MuJoCo env"),
+    # A dry run listed seed -1 as "to run"; the real run failed on it.
+    (["--methods", "bc_oh", "--envs", "Hopper-v4", "--seeds", "-1", "2", "--dry-run"], "--seeds must lie in [0, 2**32), got -1 2"),
     (["--methods", "bc_oh", "--envs", "Hopper-v4", "--extra-args", "--seeds 4"], "--extra-args sets --seeds"),
     (["--methods", "bc_oh"], "the following arguments are required: --envs"),
 ])
