@@ -279,12 +279,14 @@ def generate_demos(env_id: str, frame_skip, expert, num_samples: int, seed: int 
 # Copied from expert_ppo.write_atomically
 def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename it to path: never half a file."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
+        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
         with open(tmp, "wb") as file:
             write(file)
         os.replace(tmp, path)
+    except OSError as error:
+        raise UsageError(f"cannot write {path} ({error.strerror}): check the path and its folder")
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)

@@ -12,6 +12,7 @@ import json
 import os
 import platform
 import re
+import signal
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -197,9 +198,6 @@ def train(args: Args):
     global_step = 0
     best_return = -np.inf
 
-    def to_tensor(x):
-        return torch.as_tensor(np.asarray(x), dtype=torch.float64)
-
     # A checkpoint: a plain dict that torch.load(weights_only=True) reads (experts/README.md).
     def checkpoint(eval_return=None):
         return {
@@ -210,10 +208,10 @@ def train(args: Args):
             "action_shape": list(envs.single_action_space.shape),
             "hidden": args.hidden,
             "actor": agent.actor_mean.state_dict(),
-            "obs_mean": to_tensor(obs_rms.mean),
-            "obs_var": to_tensor(obs_rms.var),
-            "action_low": to_tensor(envs.single_action_space.low),
-            "action_high": to_tensor(envs.single_action_space.high),
+            "obs_mean": torch.as_tensor(obs_rms.mean, dtype=torch.float64),
+            "obs_var": torch.as_tensor(obs_rms.var, dtype=torch.float64),
+            "action_low": torch.as_tensor(envs.single_action_space.low, dtype=torch.float64),
+            "action_high": torch.as_tensor(envs.single_action_space.high, dtype=torch.float64),
             "args": asdict(args),
             "global_step": global_step,
             "eval_return": eval_return,
@@ -222,8 +220,8 @@ def train(args: Args):
             "agent": agent.state_dict(),
             "optimizer": optimizer.state_dict(),
             "obs_count": obs_rms.count,
-            "ret_mean": to_tensor(ret_rms.mean),
-            "ret_var": to_tensor(ret_rms.var),
+            "ret_mean": torch.as_tensor(ret_rms.mean, dtype=torch.float64),
+            "ret_var": torch.as_tensor(ret_rms.var, dtype=torch.float64),
             "ret_count": ret_rms.count,
             "best_return": best_return,
         }
@@ -451,18 +449,9 @@ def evaluate(policy, env_id: str, episodes: int, seed: int, frame_skip: int | No
     return returns
 
 
-def checkpoint_env(path: str) -> str | None:
-    """The env the checkpoint at path was made for; None if unreadable (load_expert says why)."""
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)["env_id"]
-    except Exception:
-        return None
-
-
-def retargeted_expert(path: str, env_id: str):
-    """--retarget: (expert, its env) from path, made for another version of env_id (e.g. v4 for v5)
-    with the same shapes, or whose observation is env_id's leading positions and velocities."""
-    made_for = checkpoint_env(path) or env_id
+def retargeted_expert(path: str, env_id: str, made_for: str) -> ExpertPolicy:
+    """--retarget: the expert at path, made for another version of env_id (e.g. v4 for v5) with
+    the same shapes, or whose observation is env_id's leading positions and velocities."""
     policy = load_expert(path, made_for)
     env = make_env(env_id)
     structure = getattr(env.unwrapped, "observation_structure", {})
@@ -473,7 +462,7 @@ def retargeted_expert(path: str, env_id: str):
     same_family = made_for.split("-")[0] == env_id.split("-")[0]
     other = f"{path} is an expert for {made_for}, whose family or shapes are not {env_id}'s"
     require(same_family and same_input and same_output, f"{other}: train one for {env_id}")
-    return policy, made_for
+    return policy
 
 
 def eval_only(args: Args):
@@ -481,17 +470,20 @@ def eval_only(args: Args):
     native = env_frame_skip(args.env)
     env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
-    recorded = checkpoint_env(path)
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+        recorded = checkpoint["env_id"]
+    except Exception:
+        # load_expert, below, says why it cannot be read.
+        recorded = None
     same_family = recorded is not None and recorded.split("-")[0] == args.env.split("-")[0]
     other = f"{path} is an expert for {recorded}, not {args.env}: pass --retarget to evaluate it"
     fix = f"on {args.env} (and --ship-to to ship it there), or a checkpoint made for {args.env}"
     require(args.retarget or recorded == args.env or not same_family, f"{other} {fix}")
     if args.retarget:
-        policy, made_for = retargeted_expert(path, args.env)
+        policy = retargeted_expert(path, args.env, recorded or args.env)
     else:
         policy = load_expert(path, args.env)
-        made_for = args.env
-    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     # A policy acts well at the rate it was trained at (the env's own, if not recorded).
     trained_at = checkpoint.get("frame_skip", native)
     frame_skip = args.frame_skip or trained_at
@@ -508,8 +500,9 @@ def eval_only(args: Args):
     if args.ship_to:
         # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
         checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
-        if made_for != args.env:
-            checkpoint.update(env_id=args.env, retargeted_from=made_for)
+        # The expert loaded: recorded is the env it was made for.
+        if recorded != args.env:
+            checkpoint.update(env_id=args.env, retargeted_from=recorded)
         save_atomically(checkpoint, args.ship_to)
         print(f"wrote {args.ship_to}")
     print(f"{args.env} expert: {mean:.1f} ± {std:.1f} over {len(returns)} episodes")
@@ -597,12 +590,14 @@ def machine() -> dict:
 
 def write_atomically(path: str, write):
     """Call write(file) on a temporary file, then rename it to path: never half a file."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
+        os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
         with open(tmp, "wb") as file:
             write(file)
         os.replace(tmp, path)
+    except OSError as error:
+        raise UsageError(f"cannot write {path} ({error.strerror}): check the path and its folder")
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
@@ -687,6 +682,8 @@ def make_demos(args: Args):
 
 
 if __name__ == "__main__":
+    # `kill PID` stops a run as Ctrl-C does; latest.pt is never half written.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         args = tyro.cli(Args)
         if args.make_demos:
@@ -698,3 +695,6 @@ if __name__ == "__main__":
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        print("interrupted: a training run goes on with --resume", file=sys.stderr)
+        sys.exit(130)

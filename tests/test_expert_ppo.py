@@ -1,8 +1,12 @@
 """Tests of expert_ppo.py: a tiny training run, its checkpoint, resuming, evaluation, --make-demos and bad input."""
 import contextlib
 import hashlib
+import os
 import re
 import shutil
+import signal
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -208,6 +212,46 @@ def test_interrupted_save_keeps_the_old_checkpoint(interrupted_save):
 
 def test_interrupted_save_leaves_no_tmp_file(interrupted_save):
     assert not list(interrupted_save.parent.glob("*.tmp*"))
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "kill"])
+def test_an_interrupted_training_says_how_to_go_on_in_one_line(how, tmp_path):
+    """Ctrl-C printed a traceback and `kill` nothing; both now end in one line, exit 130, and latest.pt (written
+    atomically) is whole for --resume."""
+    command = [sys.executable, str(REPO_ROOT / "expert_ppo.py"), *map(str, TINY), "--output-dir", str(tmp_path)]
+    job = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                           env=dict(os.environ, PYTHONUNBUFFERED="1"), preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for line in job.stdout:  # the 4th rollout: latest.pt was written after the 2nd
+        if line.startswith("step      4096 |"):
+            break
+    job.send_signal(signal.SIGINT if how == "ctrl-c" else signal.SIGTERM)
+    _, stderr = job.communicate(timeout=60)
+    assert job.returncode == 130 and stderr.splitlines() == ["interrupted: a training run goes on with --resume"], stderr
+    assert load(tmp_path / "latest.pt")["global_step"] >= 2048
+
+
+def test_a_checkpoint_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
+    """A read-only --output-dir (a read-only mount; chmod does not stop root) raised PermissionError at the first
+    checkpoint. The OS's answer is played here by os.replace, which moves the finished temporary file into place."""
+
+    def refuse(source, target):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    result = run_in_process("expert_ppo.py", *TINY, "--total-timesteps", 1024, "--output-dir", tmp_path)
+    assert_usage_error(result, f"cannot write {tmp_path / 'latest.pt'} (Permission denied): check the path and its folder")
+    assert list(tmp_path.iterdir()) == [], "no temporary file is left"
+
+
+def test_a_file_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
+    """--ship-to a folder, and --make-demos where demos/ is a file, raised IsADirectoryError and FileExistsError."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "demos").write_text("")
+    result = run_in_process("expert_ppo.py", "--eval-only", "--eval-episodes", 1, "--checkpoint", SHIPPED_EXPERT, "--ship-to", tmp_path)
+    assert_usage_error(result, f"cannot write {tmp_path} (Is a directory): check the path and its folder")
+    result = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 20, "--checkpoint", SHIPPED_EXPERT)
+    assert_usage_error(result, "cannot write demos/Hopper-v4_20.npz (File exists): check the path and its folder")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["demos"], "no temporary file is left"
 
 
 # ----------------------------------------------------------------------------------------------
