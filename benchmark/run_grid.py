@@ -101,10 +101,18 @@ def parse_options(argv=None) -> Options:
 # What may run
 
 
+def method_files(scripts_dir: Path) -> list:
+    """The method files' names (no .py): the scripts that declare METHOD = "<their file name>"."""
+    names = []
+    for path in sorted(scripts_dir.glob("*.py")):
+        if re.search(rf'^METHOD = "{re.escape(path.stem)}"', path.read_text(), re.M):
+            names.append(path.stem)
+    return names
+
+
 def available_methods(scripts_dir: Path) -> list:
-    """Method files are the scripts that declare METHOD = "<their file name>"; plus their variants
-    (e.g. c2f_output = c2f.py --fusion output) and the expert."""
-    methods = [path.stem for path in sorted(scripts_dir.glob("*.py")) if re.search(rf'^METHOD = "{re.escape(path.stem)}"', path.read_text(), re.M)]
+    """The method files, their variants (c2f_output = c2f.py --fusion output...) and the expert."""
+    methods = method_files(scripts_dir)
     variants = [name for name in VARIANTS if script_of(name) in methods]
     return methods + variants + ([EXPERT] if (scripts_dir / "expert_ppo.py").is_file() else [])
 
@@ -115,7 +123,11 @@ def check_options(options: Options):
         raise UsageError("--slurm needs the name of the file to write, e.g. --slurm grid.sh")
     if not options.scripts_dir.is_dir():
         raise UsageError(f"--scripts-dir {options.scripts_dir} is not a folder: pass a checkout of this repository")
+    check_results_dir(options.results_dir)
     known = available_methods(options.scripts_dir)
+    if not known:  # "choose from" nothing
+        raise UsageError(f"--scripts-dir {options.scripts_dir} holds no method files: "
+                         "pass a checkout of this repository")
     for method in options.methods:
         if method not in known:
             raise UsageError(f"unknown method {method!r}: choose from {', '.join(known)}")
@@ -134,13 +146,38 @@ def check_options(options: Options):
             raise UsageError(f"no expert checkpoint experts/{env}.pt for {env}: train one with `python expert_ppo.py --env {env}` first")
     if options.workers < 1 or options.expert_episodes < 1:
         raise UsageError(f"--workers and --expert-episodes must be at least 1, got {options.workers} and {options.expert_episodes}")
-    if len(set(options.seeds)) != len(options.seeds):
-        raise UsageError(f"--seeds lists a seed twice: {' '.join(map(str, options.seeds))}")
+    check_distinct("--methods", options.methods)
+    check_distinct("--envs", options.envs)
+    check_distinct("--seeds", options.seeds)
     if min(options.seeds) < 0 or max(options.seeds) >= 2**32:  # as the method files refuse them, before the grid
         raise UsageError(f"--seeds must lie in [0, 2**32), got {' '.join(map(str, options.seeds))}")
     for name in explicit_settings(options.extra_args):
         if name in SET_BY_RUNNER:
             raise UsageError(f"--extra-args sets --{name.replace('_', '-')}, which the runner sets for each combination: leave it out")
+    words = options.extra_args
+    if words and not words[0].startswith("--"):  # every run would refuse it
+        raise UsageError(f"--extra-args starts with {words[0]!r}, not a flag: e.g. \"--epochs 2\"")
+
+
+def check_results_dir(folder: Path):
+    """Refuse a --results-dir that cannot be made or written in before the grid starts (a dry run
+    too: it lists what the grid would do); makes nothing."""
+    existing = next(path for path in (folder, *folder.parents) if path.exists())
+    if not existing.is_dir():
+        reason = f"{existing} is not a folder"
+    elif not os.access(existing, os.W_OK | os.X_OK):
+        reason = f"{existing} is not writable"
+    else:
+        return
+    problem = f"--results-dir {folder} cannot hold results: {reason}"
+    raise UsageError(f"{problem}: pass another --results-dir")
+
+
+def check_distinct(flag: str, values: list):
+    """Refuse a value given twice: the same run (or timing) would be made twice, side by side."""
+    repeated = [value for index, value in enumerate(values) if value in values[:index]]
+    if repeated:
+        raise UsageError(f"{flag} lists {repeated[0]} twice: name each once")
 
 
 def combinations(options: Options) -> list:

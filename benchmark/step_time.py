@@ -27,6 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at
 from benchmark.results import OneLineParser, UsageError, run_cli
+from benchmark.run_grid import check_distinct, last_line_of, method_files
 
 
 def start(script_path: Path, epochs: int, out: Path, cuda: bool, env: dict) -> subprocess.Popen:
@@ -45,10 +46,29 @@ def ms_per_step(run: subprocess.Popen, out: Path) -> float:
     """Wait for the run; its ms per training step."""
     _, stderr = run.communicate()
     if run.returncode != 0:
-        last_line = stderr.strip().splitlines()[-1:]
-        raise UsageError(f"{' '.join(run.args[1:])} failed: {last_line}")
+        raise UsageError(f"{' '.join(run.args[1:])} failed: {last_line_of(stderr)}")
     result = json.loads((out / "result_seeds1.json").read_text())
     return result["scores"]["1"]["ms_per_step"]
+
+
+def timed_script(commit: str, script: str, folder: Path) -> Path:
+    """script_at's file, refused when that version records no ms_per_step (a commit older than
+    the scripts' timing of their training loop)."""
+    path = script_at(commit, script, folder)
+    if "ms_per_step" not in path.read_text():
+        advice = f"give a later --baseline, e.g. {BEFORE_FUSED_ADAM}"
+        raise UsageError(f"{script}.py at {commit} records no ms_per_step: {advice}")
+    return path
+
+
+def check_scripts(scripts: list):
+    """Refuse what is not a method file (the scripts step_time can run and read) before any run."""
+    known = method_files(REPO_ROOT)
+    for script in scripts:
+        if script not in known:
+            choices = ", ".join(known)
+            raise UsageError(f"--scripts {script} is not a method file: choose from {choices}")
+    check_distinct("--scripts", scripts)
 
 
 def figures(values: list) -> str:
@@ -59,7 +79,9 @@ def main(argv=None) -> int:
     parser = OneLineParser(
         prog="python -m benchmark.step_time", description=__doc__.splitlines()[0]
     )
-    parser.add_argument("--scripts", nargs="+", default=["bc_oh", "c2f", "fca"])
+    parser.add_argument(
+        "--scripts", nargs="+", default=["bc_oh", "c2f", "fca"], help="method files, without .py"
+    )
     parser.add_argument("--baseline", default=BEFORE_FUSED_ADAM, help="the commit to compare with")
     parser.add_argument("--epochs", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=3, help="pairs of runs of each script")
@@ -78,18 +100,21 @@ def main(argv=None) -> int:
         if not name or not equals:
             raise UsageError(f"--env-now {setting!r} is not VAR=VALUE: e.g. MKL_CBWR=COMPATIBLE")
         env_now[name] = value
-    for script in options.scripts:
-        if not (REPO_ROOT / f"{script}.py").is_file():
-            raise UsageError(f"unknown script {script}.py: name a method file, e.g. c2f")
+    check_scripts(options.scripts)
     if options.epochs <= 0 or options.repeats <= 0:
         raise UsageError("--epochs and --repeats must be positive")
+    if not options.baseline.strip():  # git would show the staged file
+        raise UsageError(f"--baseline needs a commit, e.g. --baseline {BEFORE_FUSED_ADAM}")
     before = {script: [] for script in options.scripts}
     after = {script: [] for script in options.scripts}
     with tempfile.TemporaryDirectory() as tmp:
+        versions = {}  # every version found (or refused) before the first run
+        for script in options.scripts:
+            old_path = timed_script(options.baseline, script, Path(tmp))
+            versions[script] = old_path, timed_script("HEAD", script, Path(tmp))
         for repeat in range(options.repeats):
             for script in options.scripts:
-                old_path = script_at(options.baseline, script, Path(tmp))
-                new_path = script_at("HEAD", script, Path(tmp))
+                old_path, new_path = versions[script]
                 old_out = Path(tmp, f"{script}_baseline_{repeat}")
                 new_out = Path(tmp, f"{script}_new_{repeat}")
                 old_run = start(old_path, options.epochs, old_out, options.cuda, {})

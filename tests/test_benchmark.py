@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error, plant, run_module
+from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, plant, run_in_process, run_module
 
 from benchmark import aggregate, run_grid
 from benchmark.results import ResultError, UsageError, make_result, read_result, result_path, run_cli
@@ -285,15 +285,18 @@ def test_the_grid_refuses_a_missing_scripts_dir_and_an_empty_slurm_name(scripts,
     assert calls(scripts) == []
 
 
-def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
-    box = """\
+TYRO_BOX = """\
 ╭─ Unrecognized options ──────────────╮
 │ Unrecognized options: --epoch, 1    │
 │ ─────────────────────────────────── │
 │ For full helptext, run bc_oh.py --help │
 ╰─────────────────────────────────────╯
 """
-    assert run_grid.last_line_of(box) == "Unrecognized options: --epoch, 1"
+"""how a method file (tyro) refuses its flags"""
+
+
+def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
+    assert run_grid.last_line_of(TYRO_BOX) == "Unrecognized options: --epoch, 1"
     assert run_grid.last_line_of("training\nerror: --seeds needs distinct seeds\n") == "error: --seeds needs distinct seeds"
     assert run_grid.last_line_of("a log cut after a box's top\n╰──╯\n") == "╰──╯"  # no box to read: the last line
 
@@ -314,6 +317,74 @@ def test_bad_grid_input_is_one_line(args, expected, tmp_path):
     assert_usage_error(result, expected)
     assert result.returncode == 2 and not list(tmp_path.iterdir())
 
+
+
+def refused(result, message):
+    """Assert that a tool run by run_in_process refused its input with exactly `error: message`
+    and exit status 2, and printed nothing else."""
+    assert (result.returncode, result.stderr, result.stdout) == (2, f"error: {message}\n", "")
+
+
+def grid_in_process(scripts, results, *args):
+    """run_grid as its command runs (run_cli), in this process: run_in_process's result."""
+    folders = ["--scripts-dir", scripts, "--results-dir", results]
+    return run_in_process("benchmark/run_grid.py", *folders, *args)
+
+
+@pytest.mark.parametrize("results, blocker, reason", [
+    ("file/runs", "file", "is not a folder"),
+    ("read_only", "read_only", "is not writable"),
+    ("read_only/runs", "read_only", "is not writable"),
+])
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]])
+def test_a_results_dir_that_cannot_be_written_is_refused_before_the_grid(
+        scripts, tmp_path, monkeypatch, results, blocker, reason, dry_run):
+    """A --results-dir under a file made the demos, then failed every run; in a read-only folder
+    (a read-only mount: chmod does not stop root, so os.access, which the check asks, plays the
+    OS's answer) it did the same; a dry run listed the runs as to run. Now one line before
+    anything, making nothing."""
+    (tmp_path / "file").write_text("")
+    read_only = tmp_path / "read_only"
+    read_only.mkdir()
+    real_access = os.access
+
+    def access(where, mode):
+        if Path(where) == read_only:
+            return False
+        return real_access(where, mode)
+
+    monkeypatch.setattr(os, "access", access)
+    args = ["--methods", "fake", "--envs", "Hopper-v4", *dry_run]
+    result = grid_in_process(scripts, tmp_path / results, *args)
+    problem = f"{tmp_path / results} cannot hold results: {tmp_path / blocker} {reason}"
+    refused(result, f"--results-dir {problem}: pass another --results-dir")
+    assert demos_made(scripts) == [] and calls(scripts) == []
+    assert not (read_only / "runs").exists()
+
+
+ONE_RUN = ["--methods", "fake", "--envs", "Hopper-v4"]
+
+
+@pytest.mark.parametrize("args, message", [
+    # The same combination twice: listed, and run side by side into the same result and log.
+    (["--methods", "fake", "fake", "--envs", "Hopper-v4"],
+     "--methods lists fake twice: name each once"),
+    (["--methods", "fake", "--envs", "Hopper-v4", "Ant-v4", "Hopper-v4"],
+     "--envs lists Hopper-v4 twice: name each once"),
+    ([*ONE_RUN, "--seeds", 1, 2, 1], "--seeds lists 1 twice: name each once"),
+    # A word before any flag: listed as to run, then each run refused it (Unrecognized options).
+    ([*ONE_RUN, "--extra-args=epochs 2"],
+     "--extra-args starts with 'epochs', not a flag: e.g. \"--epochs 2\""),
+])
+def test_input_every_run_would_refuse_is_one_line_before_the_grid(scripts, tmp_path, args, message):
+    refused(grid_in_process(scripts, tmp_path / "runs", *args, "--dry-run"), message)
+
+
+def test_a_scripts_dir_without_method_files_is_told_so(tmp_path):
+    """It was told `unknown method 'bc_oh': choose from ` (nothing)."""
+    result = grid_in_process(tmp_path, tmp_path / "runs", *ONE_RUN, "--dry-run")
+    advice = "pass a checkout of this repository"
+    refused(result, f"--scripts-dir {tmp_path} holds no method files: {advice}")
 
 
 def test_a_dry_run_piped_into_head_ends_quietly(tmp_path):
@@ -466,12 +537,37 @@ def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_t
     assert "fused=True" not in old.read_text() and "fused=True" in (REPO_ROOT / "c2f.py").read_text()
     with pytest.raises(UsageError, match="git cannot show c2f.py at 'no-such-commit'"):
         script_at("no-such-commit", "c2f", tmp_path)
-    with pytest.raises(UsageError, match="unknown script nothing.py"):
-        step_time.main(["--scripts", "nothing"])
     with pytest.raises(UsageError, match="--env-now 'MKL_CBWR' is not VAR=VALUE"):
         step_time.main(["--env-now", "MKL_CBWR"])
     with pytest.raises(UsageError, match="must be positive"):
         main_job_time.main(["--repeats", "0"])
+
+
+METHOD_NAMES = ", ".join(sorted(Path(name).stem for name in METHOD_FILES))
+
+
+@pytest.mark.parametrize("args, message", [
+    # expert_ppo.py ran and refused the method flags: the error was the bottom edge of tyro's box.
+    (["--scripts", "expert_ppo"],
+     f"--scripts expert_ppo is not a method file: choose from {METHOD_NAMES}"),
+    (["--scripts", "nothing"],
+     f"--scripts nothing is not a method file: choose from {METHOD_NAMES}"),
+    # Its row came twice, each with both pairs.
+    (["--scripts", "bc_oh", "bc_oh"], "--scripts lists bc_oh twice: name each once"),
+    # git showed the staged file.
+    (["--baseline", ""], "--baseline needs a commit, e.g. --baseline 8ce2c69"),
+    # A version older than its timing trained, then ended in a KeyError traceback.
+    (["--scripts", "bc_oh", "--baseline", "d8e24fd"],
+     "bc_oh.py at d8e24fd records no ms_per_step: give a later --baseline, e.g. 8ce2c69"),
+    # A script the baseline lacks (c2f_table3.py came at 80062f3) was refused after bc_oh's runs.
+    (["--scripts", "bc_oh", "c2f_table3", "--baseline", "80062f3~1"],
+     "git cannot show c2f_table3.py at '80062f3~1': give a commit of this repository"),
+])
+def test_step_time_refuses_what_it_cannot_time_in_one_line_before_any_run(args, message):
+    if "--baseline" in args and not (REPO_ROOT / ".git").exists():
+        pytest.skip("no git history here (an unpacked archive)")
+    result = run_in_process("benchmark/step_time.py", *args, "--epochs", 1, "--repeats", 1)
+    refused(result, message)
 
 
 def test_the_settings_line_gives_each_env_its_own_frame_skip():
@@ -518,6 +614,22 @@ def test_step_time_gives_env_now_to_todays_runs_alone(tmp_path):
     now = step_time.start(script, 1, tmp_path / "now", False, {"STEP_TIME_TEST_MS": "2.5"})
     assert step_time.ms_per_step(baseline, tmp_path / "baseline") == 1.0
     assert step_time.ms_per_step(now, tmp_path / "now") == 2.5
+
+
+def test_a_failed_timing_run_is_told_by_its_error_line(tmp_path, capsys):
+    """step_time told a run that failed by a list of its last line of stderr: for a method file's
+    refusal, `['╰────╯']`, the bottom edge of tyro's box. Now the line inside the box names it."""
+    from benchmark import step_time
+
+    script = tmp_path / "refuses.py"
+    script.write_text(f"import sys\nsys.stderr.write({TYRO_BOX!r})\nsys.exit(2)\n")
+    run = step_time.start(script, 1, tmp_path / "out", False, {})
+    with pytest.raises(SystemExit) as exit:
+        run_cli(lambda: step_time.ms_per_step(run, tmp_path / "out"))
+    flags = "--env Hopper-v4 --seeds 1 --epochs 1 --eval-every 1 --eval-episodes 1 --output-dir"
+    command = f"{script} {flags} {tmp_path / 'out'}"
+    refusal = f"error: {command} failed: Unrecognized options: --epoch, 1\n"
+    assert (exit.value.code, capsys.readouterr().err) == (2, refusal)
 
 
 def test_ctrl_c_or_kill_ends_a_tool_in_one_line(capsys):
