@@ -15,8 +15,11 @@ evaluations, + 0, N and 2N episodes on, N = --eval-episodes): that seed reproduc
 """
 
 import importlib
+import math
 import re
 import sys
+import types
+import typing
 from dataclasses import fields
 from pathlib import Path
 
@@ -31,6 +34,12 @@ ROOT = Path(__file__).resolve().parent.parent
 CHECKPOINT_KEYS = ("method", "env_id", "args", "obs_dim", "act_dim", "state_dict")
 """what every method file's --save-model writes"""
 SAVE_FIX = "pass a seed<S>.pt that a method file wrote with --save-model"
+RESAVE = "re-save it with --save-model"
+POSITIVE = ("history", "epochs", "batch_size", "hidden", "eval_every", "eval_episodes")
+POSITIVE += ("learning_rate", "frame_skip", "num_demo_samples", "workers")
+"""the settings every method file's run() refuses unless positive and finite (None: a default)"""
+WORDS = {int: "an int", float: "a number", str: "a str", bool: "True or False", type(None): "None"}
+"""a type of an Args field, in words"""
 RETIRED = ("expert", "cuda_graph", "velocity_dims")
 """settings the method files dropped that change neither the policy nor its evaluation (--expert:
 which expert made the demos, now expert_ppo.py --make-demos; --cuda-graph: a way of training on
@@ -68,6 +77,11 @@ def read_checkpoint(path) -> dict:
             f"{path} is not a model saved with --save-model: "
             f"it has no {missing[0]!r}{hint}; {SAVE_FIX}"
         )
+    for key in ("obs_dim", "act_dim"):
+        if not fits(checkpoint[key], int) or checkpoint[key] <= 0:
+            raise UsageError(
+                f"{path}: its {key} {checkpoint[key]!r} is not a positive int: {RESAVE}"
+            )
     method = checkpoint["method"]
     if not isinstance(method, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", method):
         raise UsageError(
@@ -101,6 +115,53 @@ def method_module(method: str, path):
     return module
 
 
+def fits(value, kind) -> bool:
+    """Whether `value` is of the type `kind` of an Args field: int, float, str, bool, X | None,
+    list[int] or Literal[...] (an int is a float too, a bool is neither)."""
+    origin = typing.get_origin(kind)
+    options = typing.get_args(kind)
+    if origin is typing.Literal:
+        return value in options
+    if origin in (typing.Union, types.UnionType):
+        return any(fits(value, option) for option in options)
+    if origin is list:
+        return isinstance(value, list) and all(fits(item, options[0]) for item in value)
+    if isinstance(value, bool) and kind is not bool:
+        return False
+    if kind is float:
+        return isinstance(value, (int, float))
+    return isinstance(value, kind)
+
+
+def in_words(kind) -> str:
+    """The type `kind` of an Args field, in words: "an int or None"."""
+    origin = typing.get_origin(kind)
+    options = typing.get_args(kind)
+    if origin is typing.Literal:
+        return "one of " + ", ".join(repr(option) for option in options)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(in_words(option) for option in options)
+    if origin is list:
+        return f"a list of {options[0].__name__} values"
+    return WORDS.get(kind, str(kind))
+
+
+def check_values(module, values: dict, path):
+    """Refuse a saved setting that the method file would refuse as a flag: of another type than
+    its Args field, a size not positive and finite, a noise std below 0 or not finite."""
+    kinds = typing.get_type_hints(module.Args)
+    for name, value in values.items():
+        if not fits(value, kinds[name]):
+            wanted = in_words(kinds[name])
+        elif name in POSITIVE and value is not None and not 0 < value < math.inf:
+            wanted = "positive and finite"
+        elif name == "obs_noise_std" and not 0 <= value < math.inf:
+            wanted = ">= 0 and finite"
+        else:
+            continue
+        raise UsageError(f"{path}: its args hold {name} {value!r}, which is not {wanted}: {RESAVE}")
+
+
 def saved_args(module, checkpoint: dict, path):
     """The method file's Args with the checkpoint's values (settings the file added since keep
     their defaults, RETIRED ones it no longer has are dropped)."""
@@ -110,7 +171,7 @@ def saved_args(module, checkpoint: dict, path):
             "evaluate it with the version of its method file that saved it"
         )
     known = {field.name for field in fields(module.Args)}
-    unknown = sorted(set(checkpoint["args"]) - known - set(RETIRED))
+    unknown = sorted(set(checkpoint["args"]) - known - set(RETIRED), key=str)
     method = checkpoint["method"]
     if unknown:
         raise UsageError(
@@ -119,6 +180,7 @@ def saved_args(module, checkpoint: dict, path):
             f"it was saved by another version of {method}.py; evaluate it with that version"
         )
     values = {name: value for name, value in checkpoint["args"].items() if name in known}
+    check_values(module, values, path)
     return module.Args(**values)
 
 
@@ -165,6 +227,9 @@ def load_policy(path):
             f"{path}: its weights do not fit the {method} policy its args describe ({first}): "
             f"re-save it with this {method}.py"
         )
+    for name, tensor in policy.state_dict().items():
+        if tensor.is_floating_point() and not torch.isfinite(tensor).all():
+            raise UsageError(f"{path}: its weights hold non-finite values ({name}): re-train it")
     # Use one thread, as the method files train and evaluate: the same digits.
     torch.set_num_threads(1)
     return module, policy.eval(), args

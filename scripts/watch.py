@@ -39,6 +39,9 @@ PROBE = (
     "r.render(); r.close()"
 )
 INSTALL = "install OSMesa (apt-get install libosmesa6) or a GPU driver for EGL"
+MAX_PIXELS = 4096
+"""the widest and tallest panel drawn: a 4K frame, well inside OpenGL's offscreen buffers (Mesa's
+EGL and OSMesa refuse sides over 16384) and a GIF's 65535"""
 WHITE = (255, 255, 255)
 BLACK = (0, 0, 0)
 
@@ -177,6 +180,8 @@ def watch(
     drawn."""
     # Every refusal comes before any OpenGL context exists.
     loaded = [load_policy(path) for path in paths]
+    if every is not None:
+        check_every(loaded[0], every, max_steps)
     panels = []
     try:
         for policy in loaded:
@@ -185,6 +190,24 @@ def watch(
     finally:
         for panel in panels:
             panel.close()
+
+
+def check_every(loaded: tuple, every: int, max_steps: int):
+    """Refuse an --every longer than the steps watched (--max-steps, or an episode if shorter):
+    it would draw the first and the last frame only (and a frame of 800 s for --every 100000)."""
+    module, _, args = loaded
+    env = module.make_env(args.env, args.frame_skip)
+    length = env.spec.max_episode_steps
+    env.close()
+    watched = min(length, max_steps)
+    limit = f"--max-steps {max_steps}"
+    if length < max_steps:
+        limit = f"the {length} steps of an episode of {args.env} at frame skip {args.frame_skip}"
+    if every > watched:
+        raise UsageError(
+            f"--every {every} is more than {limit}: no frame would be drawn between the first "
+            f"and the last; pass --every {watched} or less"
+        )
 
 
 def play(panels: list, paths: list, output: Path, max_steps: int, every) -> dict:
@@ -263,13 +286,20 @@ def main(argv=None):
     parser.add_argument(
         "--every",
         type=positive,
-        help="draw a frame every N steps (default: every 1/25 s of simulated time, or every step)",
+        help="draw a frame every N steps, at most the steps watched "
+        "(default: every 1/25 s of simulated time, or every step)",
     )
     parser.add_argument(
-        "--width", type=positive, default=320, help="width of a panel in pixels (default 320)"
+        "--width",
+        type=positive,
+        default=320,
+        help=f"width of a panel in pixels (default 320, at most {MAX_PIXELS})",
     )
     parser.add_argument(
-        "--height", type=positive, default=240, help="height of a panel in pixels (default 240)"
+        "--height",
+        type=positive,
+        default=240,
+        help=f"height of a panel in pixels (default 240, at most {MAX_PIXELS})",
     )
     options = parser.parse_args(argv)
     if options.output.suffix.lower() != ".gif":
@@ -277,10 +307,19 @@ def main(argv=None):
             f"--output {options.output} is not a .gif: "
             "the script writes animated GIFs, e.g. --output watch.gif"
         )
+    for name in ("width", "height"):
+        value = getattr(options, name)
+        if value > MAX_PIXELS:
+            raise UsageError(
+                f"--{name} {value} is more than {MAX_PIXELS} pixels, the largest panel drawn: "
+                f"pass --{name} {MAX_PIXELS} or less"
+            )
     settings = {}
     for path in options.checkpoints:
         args = read_checkpoint(path)["args"]
-        settings.setdefault((args.get("env"), args.get("frame_skip")), path)
+        # Compared as printed: load_policy refuses a value of the wrong type in one line.
+        setting = (str(args.get("env")), str(args.get("frame_skip")))
+        settings.setdefault(setting, path)
     if len(settings) > 1:
         (env_a, skip_a), (env_b, skip_b) = list(settings)[:2]
         raise UsageError(

@@ -158,6 +158,48 @@ def test_a_negative_seed_is_refused_in_one_line(trained):
     assert_usage_error(result, "argument --seed: invalid non_negative value: '-1'")
 
 
+BAD_SETTINGS = {  # a hand-edited value -> what the one line says of it, before ": re-save it with --save-model"
+    "env 5": ({"env": 5}, "its args hold env 5, which is not a str"),
+    "frame skip 0": ({"frame_skip": 0}, "its args hold frame_skip 0, which is not positive and finite"),
+    "frame skip '4'": ({"frame_skip": "4"}, "its args hold frame_skip '4', which is not an int or None"),
+    "0 episodes": ({"eval_episodes": 0}, "its args hold eval_episodes 0, which is not positive and finite"),
+    "history 0": ({"history": 0}, "its args hold history 0, which is not positive and finite"),
+    "history '2'": ({"history": "2"}, "its args hold history '2', which is not an int"),
+    "hidden -1": ({"hidden": -1}, "its args hold hidden -1, which is not positive and finite"),
+    "noise std 'x'": ({"obs_noise_std": "x"}, "its args hold obs_noise_std 'x', which is not a number"),
+    "noise std nan": ({"obs_noise_std": float("nan")}, "its args hold obs_noise_std nan, which is not >= 0 and finite"),
+    "hide velocities 'yes'": ({"hide_velocities": "yes"}, "its args hold hide_velocities 'yes', which is not True or False"),
+    "seeds '1'": ({"seeds": "1"}, "its args hold seeds '1', which is not a list of int values"),
+    "obs_dim '11'": ({"obs_dim": "11"}, "its obs_dim '11' is not a positive int"),
+    "act_dim 3.5": ({"act_dim": 3.5}, "its act_dim 3.5 is not a positive int"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_SETTINGS))
+def test_a_bad_setting_in_a_checkpoint_is_refused_in_one_line_naming_it(trained, tmp_path, case):
+    """A hand-edited value gave a traceback (frame skip 0 or '4', history '2', hidden -1, env 5, noise std 'x', 0
+    episodes), a misleading refusal (history 0: "its weights do not fit"; obs_dim '11': "of width 11, but Hopper-v4 here
+    has 11") or a silently wrong run (hide_velocities 'yes', seeds '1'; noise std nan: a return of nan, exit 0). Each is
+    checked against the type of the method file's Args field, and the sizes as its run() checks the flags."""
+    changes, problem = BAD_SETTINGS[case]
+    path = edited(trained("bc_oh")[0], tmp_path, **changes)
+    result = run_in_process("scripts/evaluate.py", path)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == f"error: {path}: {problem}: re-save it with --save-model\n"
+
+
+@pytest.mark.parametrize("name, value", [("net.0.weight", float("nan")), ("normalize.std", float("inf"))])
+def test_a_checkpoint_whose_weights_are_not_finite_is_refused_in_one_line(trained, tmp_path, name, value):
+    """NaN weights (a diverged run) evaluated to a return of nan with exit 0; an infinite std of the normaliser quietly
+    zeroed an input."""
+    path = trained("bc_oh")[0]
+    weights = torch.load(path, weights_only=True)["state_dict"]
+    weights[name][0] = value
+    result = run_in_process("scripts/evaluate.py", edited(path, tmp_path, state_dict=weights))
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == f"error: {tmp_path / 'edited.pt'}: its weights hold non-finite values ({name}): re-train it\n"
+
+
 # ---- scripts/watch.py ----
 
 
@@ -233,4 +275,52 @@ def test_watch_refuses_bad_input_in_one_line(trained, tmp_path, monkeypatch, cas
     result = run_in_process("scripts/watch.py", *make(trained("bc_oh")[0], tmp_path))
     assert result.returncode == 2
     assert_usage_error(result, message)
+    assert not (tmp_path / "w.gif").exists()
+
+
+@pytest.mark.parametrize("side", ["width", "height"])
+def test_watch_refuses_a_panel_larger_than_4096_pixels_in_one_line(trained, tmp_path, side):
+    """--width 20000 failed with MuJoCo's "Offscreen framebuffer is not complete" and a traceback (Mesa's limit is
+    16384; a 4K panel is the largest drawn)."""
+    result = run_in_process("scripts/watch.py", trained("bc_oh")[0], "--output", tmp_path / "w.gif", f"--{side}", 20000)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == f"error: --{side} 20000 is more than 4096 pixels, the largest panel drawn: pass --{side} 4096 or less\n"
+
+
+def test_watch_refuses_checkpoints_whose_env_cannot_be_compared_in_one_line(trained, tmp_path):
+    """An env of a list (unhashable) failed with a TypeError before the two settings were compared."""
+    path = trained("bc_oh")[0]
+    other = edited(path, tmp_path, env=[1])
+    result = run_in_process("scripts/watch.py", path, other, "--output", tmp_path / "w.gif")
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == (f"error: {path} is a policy for Hopper-v4 at frame skip 4, {other} for [1] at frame skip 4: "
+                             "panels step together, so watch policies of one env and control rate at a time\n")
+
+
+WATCH_REFUSED_AFTER_LOADING = {  # (edits of the checkpoint, flags) -> the one line, once a backend renders and it loaded
+    # OverflowError: a GIF frame of 800 s.
+    "every 100000": ({}, ("--every", 100000), "--every 100000 is more than --max-steps 1000: no frame would be drawn "
+                                              "between the first and the last; pass --every 1000 or less"),
+    # A GIF of two frames of 16 s each, exit 0: Hopper-v4's episodes end after 1000 steps.
+    "every past the episode": ({}, ("--max-steps", 5000, "--every", 2000),
+                               "--every 2000 is more than the 1000 steps of an episode of Hopper-v4 at frame skip 4: no "
+                               "frame would be drawn between the first and the last; pass --every 1000 or less"),
+    # RuntimeError: Trying to create tensor with negative dimension -1.
+    "a bad setting": ({"hidden": -1}, (), "{path}: its args hold hidden -1, which is not positive and finite: re-save it "
+                                          "with --save-model"),
+}
+
+
+@pytest.mark.parametrize("case", list(WATCH_REFUSED_AFTER_LOADING))
+def test_watch_refuses_an_every_longer_than_the_steps_watched_and_a_bad_setting_in_one_line(trained, backend, tmp_path,
+                                                                                            monkeypatch, case):
+    monkeypatch.setenv("MUJOCO_GL", backend)
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "")  # use_backend sets both; the test's teardown restores them
+    changes, flags, message = WATCH_REFUSED_AFTER_LOADING[case]
+    path = trained("bc_oh")[0]
+    if changes:
+        path = edited(path, tmp_path, **changes)
+    result = run_in_process("scripts/watch.py", path, "--output", tmp_path / "w.gif", *flags)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == f"error: {message.format(path=path)}\n"
     assert not (tmp_path / "w.gif").exists()
