@@ -15,6 +15,7 @@ from pathlib import Path
 
 from benchmark.machine import describe, machine
 from benchmark.results import UsageError
+from benchmark.run_grid import last_line_of, method_files
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 BEFORE_FUSED_ADAM = "8ce2c69"
@@ -26,28 +27,49 @@ def script_at(commit: str, script: str, folder: Path) -> Path:
     the working tree's file itself, uncommitted changes included."""
     if commit == "HEAD":
         return REPO_ROOT / f"{script}.py"
-    shown = subprocess.run(
-        ["git", "show", f"{commit}:{script}.py"], cwd=REPO_ROOT, capture_output=True, text=True
-    )
+    if not commit.strip():  # git would show the staged file (both benchmarks take it as --baseline)
+        raise UsageError(f"--baseline needs a commit, e.g. --baseline {BEFORE_FUSED_ADAM}")
+    shown = git("show", f"{commit}:{script}.py")
     if shown.returncode != 0:
-        raise UsageError(
-            f"git cannot show {script}.py at {commit!r}: give a commit of this repository"
-        )
+        raise UsageError(not_shown(commit, script))
     path = folder / commit / f"{script}.py"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(shown.stdout)
     return path
 
 
+def git(*args: str) -> subprocess.CompletedProcess:
+    """`git <args>` in the repository, its output captured; the exit status is not checked."""
+    return subprocess.run(["git", *args], cwd=REPO_ROOT, capture_output=True, text=True)
+
+
+def not_shown(commit: str, script: str) -> str:
+    """Why git cannot show `script`.py at `commit`: no such commit, or a commit without the file."""
+    if git("rev-parse", "--verify", f"{commit}^{{commit}}").returncode != 0:
+        return f"git cannot show {script}.py at {commit!r}: give a commit of this repository"
+    added = git("log", "--diff-filter=A", "--format=%h", "-1", "--", f"{script}.py").stdout.strip()
+    example = ""
+    if added:
+        example = f", e.g. {added}, which added it"
+    return f"commit {commit!r} has no {script}.py: give a later commit{example}"
+
+
+def check_method_file(flag: str, script: str):
+    """Refuse what is not a method file (what the speed benchmarks run and read) before any run."""
+    known = method_files(REPO_ROOT)
+    if script not in known:
+        raise UsageError(f"{flag} {script} is not a method file: choose from {', '.join(known)}")
+
+
 def timed_run(command: list) -> float:
     """Run the command from the repository's root; the seconds it took. A failed run is refused with its
-    last line of stderr."""
+    error line (run_grid.last_line_of: the line inside tyro's box, else the last line of stderr)."""
     start = time.perf_counter()
     finished = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if finished.returncode != 0:
-        last_line = finished.stderr.strip().splitlines()[-1:]
-        raise UsageError(f"{' '.join(map(str, command[1:]))} failed: {last_line}")
+        shown = " ".join(map(str, command[1:]))
+        raise UsageError(f"{shown} failed: {last_line_of(finished.stderr)}")
     return seconds
 
 

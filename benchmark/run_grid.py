@@ -119,8 +119,8 @@ def available_methods(scripts_dir: Path) -> list:
 
 def check_options(options: Options):
     """Reject unknown methods and envs, and flags the runner owns, before anything runs."""
-    if options.slurm is not None and not options.slurm.strip():
-        raise UsageError("--slurm needs the name of the file to write, e.g. --slurm grid.sh")
+    if options.slurm is not None:
+        check_slurm(options.slurm)
     if not options.scripts_dir.is_dir():
         raise UsageError(f"--scripts-dir {options.scripts_dir} is not a folder: pass a checkout of this repository")
     check_results_dir(options.results_dir)
@@ -162,15 +162,33 @@ def check_options(options: Options):
 def check_results_dir(folder: Path):
     """Refuse a --results-dir that cannot be made or written in before the grid starts (a dry run
     too: it lists what the grid would do); makes nothing."""
+    reason = unwritable(folder)
+    if reason:
+        problem = f"--results-dir {folder} cannot hold results: {reason}"
+        raise UsageError(f"{problem}: pass another --results-dir")
+
+
+def check_slurm(name: str):
+    """Refuse a --slurm FILE that cannot be written before anything is made or run."""
+    example = "e.g. --slurm grid.sh"
+    if not name.strip():
+        raise UsageError(f"--slurm needs the name of the file to write, {example}")
+    path = Path(name).absolute()
+    if path.is_dir():
+        raise UsageError(f"--slurm {name} is a folder: name the file to write, {example}")
+    reason = unwritable(path.parent)  # write_text makes the missing folders
+    if reason:
+        raise UsageError(f"--slurm {name} cannot be written: {reason}: pass another --slurm")
+
+
+def unwritable(folder: Path):
+    """Why files cannot be written in folder (made with its parents as needed), or None."""
     existing = next(path for path in (folder, *folder.parents) if path.exists())
     if not existing.is_dir():
-        reason = f"{existing} is not a folder"
-    elif not os.access(existing, os.W_OK | os.X_OK):
-        reason = f"{existing} is not writable"
-    else:
-        return
-    problem = f"--results-dir {folder} cannot hold results: {reason}"
-    raise UsageError(f"{problem}: pass another --results-dir")
+        return f"{existing} is not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return None
 
 
 def check_distinct(flag: str, values: list):

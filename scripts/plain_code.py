@@ -23,12 +23,13 @@ nearly always more lines: a plain `if` block, one assignment a line, a named hel
   noqa            a `# noqa` that silences a linter.
   long-line       a line over --max-length characters (default 100).
 
-Exit status: 0 when no file has a finding beyond what --allow lets pass, 1 otherwise, 2 on
-unreadable input or a bad --allow.
+Exit status: 0 when no file has a finding beyond what --allow lets pass, 1 otherwise (and when the
+output is cut short: `| head` stopped reading), 2 on unreadable input or a bad --allow.
 """
 
 import argparse
 import ast
+import os
 import sys
 import tokenize
 from collections import Counter
@@ -198,4 +199,10 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        status = main()
+        sys.stdout.flush()  # here, not at exit: a reader gone early is caught below
+    except BrokenPipeError:  # piped into `head`, which stopped reading: end quietly, exit 1
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit-time flush passes
+        status = 1
+    sys.exit(status)

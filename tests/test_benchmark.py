@@ -387,6 +387,22 @@ def test_a_scripts_dir_without_method_files_is_told_so(tmp_path):
     refused(result, f"--scripts-dir {tmp_path} holds no method files: {advice}")
 
 
+@pytest.mark.parametrize("slurm, message", [
+    # It made --results-dir, then was told `cannot use {tmp}: Is a directory: pass another path`.
+    ("{tmp}", "--slurm {tmp} is a folder: name the file to write, e.g. --slurm grid.sh"),
+    # `cannot use {tmp}/file: File exists: pass another path`, naming no flag.
+    ("{tmp}/file/grid.sh", "--slurm {tmp}/file/grid.sh cannot be written: "
+                           "{tmp}/file is not a folder: pass another --slurm"),
+])
+def test_a_slurm_file_that_cannot_be_written_is_refused_before_anything(
+        scripts, tmp_path, slurm, message):
+    (tmp_path / "file").write_text("")
+    name = slurm.format(tmp=tmp_path)
+    result = grid_in_process(scripts, tmp_path / "runs", *ONE_RUN, "--slurm", name)
+    refused(result, message.format(tmp=tmp_path))
+    assert not (tmp_path / "runs").exists() and calls(scripts) == []
+
+
 def test_a_dry_run_piped_into_head_ends_quietly(tmp_path):
     """`run_grid ... --dry-run | head`: the reader goes away early; no BrokenPipeError traceback."""
     grid = subprocess.Popen([sys.executable, "-m", "benchmark.run_grid", "--results-dir", str(tmp_path), "--dry-run",
@@ -544,6 +560,9 @@ def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_t
 
 
 METHOD_NAMES = ", ".join(sorted(Path(name).stem for name in METHOD_FILES))
+NO_TABLE3 = ("commit '80062f3~1' has no c2f_table3.py: "
+             "give a later commit, e.g. 80062f3, which added it")
+"""how the speed benchmarks refuse a baseline that lacks the script (it was told to be no commit)"""
 
 
 @pytest.mark.parametrize("args, message", [
@@ -560,14 +579,61 @@ METHOD_NAMES = ", ".join(sorted(Path(name).stem for name in METHOD_FILES))
     (["--scripts", "bc_oh", "--baseline", "d8e24fd"],
      "bc_oh.py at d8e24fd records no ms_per_step: give a later --baseline, e.g. 8ce2c69"),
     # A script the baseline lacks (c2f_table3.py came at 80062f3) was refused after bc_oh's runs.
-    (["--scripts", "bc_oh", "c2f_table3", "--baseline", "80062f3~1"],
-     "git cannot show c2f_table3.py at '80062f3~1': give a commit of this repository"),
+    (["--scripts", "bc_oh", "c2f_table3", "--baseline", "80062f3~1"], NO_TABLE3),
 ])
 def test_step_time_refuses_what_it_cannot_time_in_one_line_before_any_run(args, message):
     if "--baseline" in args and not (REPO_ROOT / ".git").exists():
         pytest.skip("no git history here (an unpacked archive)")
     result = run_in_process("benchmark/step_time.py", *args, "--epochs", 1, "--repeats", 1)
     refused(result, message)
+
+
+@pytest.mark.parametrize("args, message", [
+    # expert_ppo.py ran and refused the method flags, told as ['╰────╯'] (its box's bottom edge).
+    (["--script", "expert_ppo"],
+     f"--script expert_ppo is not a method file: choose from {METHOD_NAMES}"),
+    (["--script", "nothing"], f"--script nothing is not a method file: choose from {METHOD_NAMES}"),
+    # Both ran, into one output folder and one row of the table.
+    (["--workers", 1, 1], "--workers lists 1 twice: name each once"),
+    # git showed the staged file, timed as the baseline.
+    (["--baseline", ""], "--baseline needs a commit, e.g. --baseline 8ce2c69"),
+    # A version older than --workers (f23377c) ran and refused the flag.
+    (["--baseline", "f23377c~1"],
+     "c2f.py at f23377c~1 takes no --workers: give a later --baseline, e.g. 8ce2c69"),
+    (["--script", "c2f_table3", "--baseline", "80062f3~1"], NO_TABLE3),
+])
+def test_main_job_time_refuses_what_it_cannot_time_in_one_line_before_any_run(
+        args, message, monkeypatch):
+    from benchmark import baseline
+
+    if "--baseline" in args and not (REPO_ROOT / ".git").exists():
+        pytest.skip("no git history here (an unpacked archive)")
+    monkeypatch.setattr(baseline, "timed_run", lambda command: pytest.fail(f"ran {command}"))
+    result = run_in_process("benchmark/main_job_time.py", *args, "--epochs", 1, "--repeats", 1)
+    refused(result, message)
+
+
+def test_main_job_time_against_head_keeps_each_setting_apart(monkeypatch, capsys):
+    """With --baseline HEAD, the baseline (HEAD at the cores' count) and the same count of --workers
+    ran into one output folder and made one row of the table. Each setting is its own row now."""
+    from benchmark import main_job_time
+
+    cores = len(os.sched_getaffinity(0))
+    outputs = []
+    seconds = iter([10.0, 12.0])
+
+    def timed_run(command):
+        outputs.append(command[command.index("--output-dir") + 1])
+        return next(seconds)
+
+    monkeypatch.setattr(main_job_time, "timed_run", timed_run)
+    monkeypatch.setattr(main_job_time, "machine_line", lambda: "a machine")
+    args = ["--baseline", "HEAD", "--workers", str(cores), "--epochs", "1", "--repeats", "1"]
+    assert main_job_time.main(args) == 0
+    assert len(set(outputs)) == 2
+    rows = capsys.readouterr().out.splitlines()[-2:]
+    assert rows == [f"| this checkout | {cores} | 10.0 | 10.0 | 1.00x |",
+                    f"| this checkout | {cores} | 12.0 | 12.0 | 1.20x |"]
 
 
 def test_the_settings_line_gives_each_env_its_own_frame_skip():
@@ -629,6 +695,19 @@ def test_a_failed_timing_run_is_told_by_its_error_line(tmp_path, capsys):
     flags = "--env Hopper-v4 --seeds 1 --epochs 1 --eval-every 1 --eval-episodes 1 --output-dir"
     command = f"{script} {flags} {tmp_path / 'out'}"
     refusal = f"error: {command} failed: Unrecognized options: --epoch, 1\n"
+    assert (exit.value.code, capsys.readouterr().err) == (2, refusal)
+
+
+def test_a_failed_job_is_told_by_its_error_line(tmp_path, capsys):
+    """main_job_time (baseline.timed_run) told a run that failed by a list of its last line of
+    stderr, `['╰────╯']` for a method file's refusal; now by the line inside tyro's box."""
+    from benchmark.baseline import timed_run
+
+    script = tmp_path / "refuses.py"
+    script.write_text(f"import sys\nsys.stderr.write({TYRO_BOX!r})\nsys.exit(2)\n")
+    with pytest.raises(SystemExit) as exit:
+        run_cli(lambda: timed_run([sys.executable, str(script), "--epoch", "1"]))
+    refusal = f"error: {script} --epoch 1 failed: Unrecognized options: --epoch, 1\n"
     assert (exit.value.code, capsys.readouterr().err) == (2, refusal)
 
 

@@ -163,3 +163,17 @@ def test_plain_code_lets_allowed_findings_pass(tmp_path):
     path.write_text(KIND_SNIPPETS["packed-assign"] * 4)
     assert run_plain_code("--allow", "packed-assign=3", path).returncode == 1
     assert run_plain_code("--allow", "packed-assign=x", path).returncode == 2
+
+
+def test_plain_code_piped_into_head_ends_quietly(tmp_path):
+    """`plain_code.py FILE... | head -1`: the reader goes away early. It printed a BrokenPipeError
+    traceback; now it ends with nothing on stderr, exit 1 (its output was cut short)."""
+    path = tmp_path / "long.py"
+    path.write_text(KIND_SNIPPETS["long-line"] * 2000)  # 2000 findings: more than a pipe holds
+    command = [sys.executable, str(REPO_ROOT / "scripts" / "plain_code.py"), str(path)]
+    pipes = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE}
+    finder = subprocess.Popen(command, cwd=REPO_ROOT, text=True, **pipes)
+    assert finder.stdout.readline().startswith("file ")
+    finder.stdout.close()  # like head after its line
+    stderr = finder.stderr.read()
+    assert (finder.wait(timeout=60), stderr) == (1, "")
