@@ -25,9 +25,15 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.baseline import BEFORE_FUSED_ADAM, REPO_ROOT, machine_line, script_at
+from benchmark.baseline import (
+    BEFORE_FUSED_ADAM,
+    REPO_ROOT,
+    check_method_file,
+    machine_line,
+    script_at,
+)
 from benchmark.results import OneLineParser, UsageError, run_cli
-from benchmark.run_grid import check_distinct, last_line_of, method_files
+from benchmark.run_grid import check_distinct, last_line_of
 
 
 def start(script_path: Path, epochs: int, out: Path, cuda: bool, env: dict) -> subprocess.Popen:
@@ -61,16 +67,6 @@ def timed_script(commit: str, script: str, folder: Path) -> Path:
     return path
 
 
-def check_scripts(scripts: list):
-    """Refuse what is not a method file (the scripts step_time can run and read) before any run."""
-    known = method_files(REPO_ROOT)
-    for script in scripts:
-        if script not in known:
-            choices = ", ".join(known)
-            raise UsageError(f"--scripts {script} is not a method file: choose from {choices}")
-    check_distinct("--scripts", scripts)
-
-
 def figures(values: list) -> str:
     return ", ".join(f"{value:.3f}" for value in values)
 
@@ -100,11 +96,11 @@ def main(argv=None) -> int:
         if not name or not equals:
             raise UsageError(f"--env-now {setting!r} is not VAR=VALUE: e.g. MKL_CBWR=COMPATIBLE")
         env_now[name] = value
-    check_scripts(options.scripts)
+    for script in options.scripts:
+        check_method_file("--scripts", script)
+    check_distinct("--scripts", options.scripts)
     if options.epochs <= 0 or options.repeats <= 0:
         raise UsageError("--epochs and --repeats must be positive")
-    if not options.baseline.strip():  # git would show the staged file
-        raise UsageError(f"--baseline needs a commit, e.g. --baseline {BEFORE_FUSED_ADAM}")
     before = {script: [] for script in options.scripts}
     after = {script: [] for script in options.scripts}
     with tempfile.TemporaryDirectory() as tmp:
