@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark import run_grid
 from benchmark.paper import METHOD_NAMES, NATIVE_FRAME_SKIP, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
 from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
 
@@ -77,6 +78,27 @@ def collect(results_dir: Path, allow_nonpaper: bool):
                 problems.append(f"left out seed {record.seed} of {older.path}: {record.path} is newer and holds it too")
             records[key] = record
     return list(records.values()), problems
+
+
+def check_folder(folder: Path, what: str, fix: str):
+    """Refuse in one line a folder to read that is not there, or is a file:
+    '{what} {folder} not found: {fix}'."""
+    if folder.is_dir():
+        return
+    problem = "is a file, not a folder" if folder.exists() else "not found"
+    raise UsageError(f"{what} {folder} {problem}: {fix}")
+
+
+def check_writable(path: Path, flag: str, is_file: bool = False):
+    """Refuse in one line, before any work, an output path (a folder, or with is_file a file) that
+    cannot be written: a file in the way of its folder, a folder where the file goes, no right to
+    it."""
+    path = Path(path)
+    reason = run_grid.unwritable(path.parent if is_file else path)
+    if is_file and path.is_dir():
+        reason = f"{path} is a folder"
+    if reason:
+        raise UsageError(f"{flag} {path} cannot be written: {reason}: pass another {flag}")
 
 
 def ordered(names, order) -> list:
@@ -288,9 +310,14 @@ PAGE_START, PAGE_END = "<!-- table2 -->", "<!-- /table2 -->"
 
 def page_parts(page: Path, start=PAGE_START, end=PAGE_END) -> tuple:
     """The page's text up to its start marker, and from its end marker on."""
+    if page.is_dir():
+        raise UsageError(f"page {page} is a folder: pass the markdown page itself to --page")
     if not page.is_file():
         raise UsageError(f"page {page} not found: check the --page path")
-    text = page.read_text()
+    try:
+        text = page.read_text()
+    except UnicodeDecodeError:
+        raise UsageError(f"page {page} is not text (not UTF-8): pass the markdown page to --page")
     if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
         raise UsageError(f"{page} needs one {start} line and, after it, one {end} line: add them where the table goes")
     return text[:text.index(start) + len(start)], text[text.index(end):]
@@ -315,11 +342,16 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.page:
         page_parts(args.page)  # check the markers before anything is written
-    if not args.results_dir.is_dir():
-        raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.run_grid first, or pass --results-dir")
+    fix = "run python -m benchmark.run_grid first, or pass --results-dir"
+    check_folder(args.results_dir, "results folder", fix)
+    check_writable(args.out, "--out")
     records, problems = collect(args.results_dir, args.allow_nonpaper)
     for problem in problems:
         print(problem, file=sys.stderr)
+    if not problems and not records:  # not one result file: not the folder run_grid wrote
+        folder = args.results_dir
+        raise UsageError(f"no <method>/<env>/result_seeds*.json under {folder}: pass the folder "
+                         "python -m benchmark.run_grid wrote (--results-dir), or run it")
     if not records:
         raise UsageError(f"no valid results to aggregate under {args.results_dir} (see above): run python -m benchmark.run_grid")
     methods, envs, _ = build_table(records)

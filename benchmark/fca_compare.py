@@ -6,7 +6,11 @@ adversary's error over training.
 
 Reads every `<dir>/fca/<env>/seed<S>.log` with its `result_seeds<S>.json` (a log without its result is a run still
 going and is left out), writes `<out>/fca_compare.md` and `<out>/fca_adversary.png`.
+A result that does not read, and a log without an adversary error, are left out and named on
+stderr. A NaN adversary error counts as above the bound (its predictions are not numbers, so not
+inside the action bounds).
 """
+import math
 import re
 import sys
 from pathlib import Path
@@ -15,7 +19,7 @@ import numpy as np
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.aggregate import save_figure
+from benchmark.aggregate import check_writable, save_figure
 from benchmark.paper import PAPER_TABLE2
 from benchmark.results import OneLineParser, ResultError, UsageError, read_result, run_cli, write_text
 
@@ -30,25 +34,46 @@ def adversary_curve(log: Path) -> list:
     return [(int(epoch), float(error)) for epoch, error in PROGRESS.findall(log.read_text(errors="replace"))]
 
 
-def runs(folder: Path, env: str) -> dict:
-    """{seed: (score, adversary curve)} of the finished FCA runs of env under folder."""
+def runs(folder: Path, env: str, seeds=None) -> tuple:
+    """({seed: (score, adversary curve)} of the finished FCA runs of env under folder (of `seeds`,
+    if given), and a line per seed left out: a log not named seed<S>.log, a result that does not
+    read, a log without an adversary error. A log without its result is a run still going: left
+    out, not listed."""
     found = {}
+    problems = []
     for log in sorted((Path(folder) / "fca" / env).glob("seed*.log")):
-        seed = int(log.stem.removeprefix("seed"))
+        name = log.stem.removeprefix("seed")
+        if not name.isdecimal():  # seed1.old.log: not a run's log
+            problems.append(f"left out {log}: not a run's log (seed<S>.log)")
+            continue
+        seed = int(name)
+        path = log.with_name(f"result_seeds{seed}.json")
+        if (seeds is not None and seed not in seeds) or not path.exists():
+            continue  # not asked for, or still running
         try:
-            result = read_result(log.with_name(f"result_seeds{seed}.json"), "fca", env, [seed])
-        except (ResultError, OSError):
-            continue  # still running, or not a result: not counted
-        found[seed] = (result["scores"][str(seed)]["score"], adversary_curve(log))
-    return found
+            result = read_result(path, "fca", env, [seed])
+        except ResultError as error:
+            problems.append(f"left out {path}: {error}")
+            continue
+        curve = adversary_curve(log)
+        if not curve:  # fca.py's progress lines carry it: a log cut short, or of another script
+            problems.append(f"left out {log}: no adversary error in its progress lines")
+            continue
+        found[seed] = (result["scores"][str(seed)]["score"], curve)
+    return found, problems
+
+
+def peak(curve: list) -> float:
+    """A curve's largest adversary error; a NaN error counts as infinite (above any bound)."""
+    return max(math.inf if math.isnan(error) else error for _, error in curve)
 
 
 def row(found: dict) -> str:
     if not found:
         return "— | — | —"
     scores = [score for score, _ in found.values()]
-    peaks = [max((error for _, error in curve), default=float("nan")) for _, curve in found.values()]
-    diverged = sum(peak > DIVERGED_ABOVE for peak in peaks)
+    peaks = [peak(curve) for _, curve in found.values()]
+    diverged = sum(value > DIVERGED_ABOVE for value in peaks)
     return (f"{np.mean(scores):.0f} ± {np.std(scores):.0f} (n={len(scores)}) | {min(peaks):.3g}–{max(peaks):.3g} | "
             f"{diverged} of {len(scores)}")
 
@@ -97,7 +122,16 @@ def main(argv=None) -> int:
     for folder in (args.new, args.old):
         if not (folder / "fca").is_dir():
             raise UsageError(f"no fca/ folder in {folder}: pass the results folder that holds fca/<env>/ runs")
-    new, old = ({env: runs(folder, env) for env in ENVS} for folder in (args.new, args.old))
+    check_writable(args.out, "--out")
+    new = {}
+    old = {}
+    problems = []
+    for folder, found in ((args.new, new), (args.old, old)):
+        for env in ENVS:
+            found[env], more = runs(folder, env)
+            problems += more
+    for problem in problems:
+        print(problem, file=sys.stderr)
     command = f"python -m benchmark.fca_compare --new {args.new} --old {args.old} --out {args.out}"
     text = markdown(new, old, command)
     write_text(args.out / "fca_compare.md", text)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark.aggregate import check_writable
 from benchmark.machine import MKL_VARIABLES, machine
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 
@@ -382,14 +383,37 @@ def recorded_evaluation(record: dict) -> str:
     return f"{here!r} here, {recorded!r} recorded by its run ({where}): {abs(here - recorded) / recorded:.2g} relative"
 
 
+RECORD_TYPES = {"demos": dict, "weights": str, "evaluations": list, "probes": dict}
+"""the JSON type of each part of a record that compare() and probe_differences() read"""
+
+
+def is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def read_record(path) -> dict:
     """A record this module wrote: a JSON object with at least one stage (an empty one would compare as "the same")."""
     try:
         record = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as error:
-        raise UsageError(f"cannot read the record {path}: {error}")
+    except OSError as error:
+        reason = error.strerror or str(error)
+    except ValueError as error:  # JSONDecodeError, UnicodeDecodeError
+        reason = f"not JSON: {error}"
+    else:
+        reason = None
+    if reason is not None:
+        raise UsageError(f"cannot read the record {path} ({reason}): pass one this module wrote")
     if not isinstance(record, dict) or not any(stage in record for stage in STAGES):
         raise UsageError(f"{path} is not a fingerprint record (none of {', '.join(STAGES)}): pass one this module wrote")
+    wrong = [name for name, kind in RECORD_TYPES.items()
+             if name in record and not isinstance(record[name], kind)]
+    evaluations = record.get("evaluations")
+    if isinstance(evaluations, list) and not all(map(is_number, evaluations)):
+        wrong.append("evaluations")
+    if wrong:  # compared as written, a part of another shape ended in a traceback
+        shapes = ", ".join(wrong)
+        raise UsageError(f"{path} is not a fingerprint record ({shapes} not as this module writes "
+                         "them): pass one this module wrote")
     return record
 
 
@@ -406,6 +430,7 @@ def main(argv=None) -> int:
         print(explain(*map(read_record, options.compare)))
         return 0
     other = read_record(options.compare[0]) if options.compare else None
+    check_writable(Path(options.out), "--out")  # before the run, not after it
     record = measure({} if options.default_mode else FIXED_MODE)
     print(json.dumps(record, indent=1))
     path = record_path(options.out, record)

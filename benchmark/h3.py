@@ -22,8 +22,8 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark import regime_summary
-from benchmark.regimes import RESULTS_DIR
+from benchmark import aggregate, regime_summary
+from benchmark.regimes import RESULTS_DIR, existing_runs_dir
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 
 REGIME, ENV = "native_hidden", "Hopper-v4"
@@ -70,9 +70,10 @@ def read_report(path: Path, models, hidden: bool) -> tuple:
     return seeds["c2f"], report
 
 
-def gather(analysis_dir: Path, reference_dir: Path) -> tuple:
-    """({seed: report} here, {seed: report} at the paper's setting, lines on what was left out)."""
-    reports, references, problems = {}, {}, []
+def gather(analysis_dir: Path) -> tuple:
+    """({seed: report} here, lines on what was left out)."""
+    reports = {}
+    problems = []
     for path in sorted(analysis_dir.glob("seed*/copycat_analysis.json")):
         try:
             seed, report = read_report(path, MODELS, hidden=True)
@@ -81,16 +82,32 @@ def gather(analysis_dir: Path, reference_dir: Path) -> tuple:
             reports[seed] = report
         except ValueError as error:
             problems.append(f"left out {path}: {error}")
+    return reports, problems
+
+
+def gather_references(analysis_dir: Path, reference_dir: Path) -> tuple:
+    """({seed: report} at the paper's setting, lines on what was left out): the reports under
+    reference_dir but those of analysis_dir."""
+    references = {}
+    problems = []
     for path in sorted(reference_dir.glob("**/copycat_analysis.json")):
+        if analysis_dir.resolve() in path.resolve().parents:
+            continue  # the reports here, not the reference
         try:
-            if analysis_dir.resolve() not in path.resolve().parents and not json.loads(path.read_text()).get("hide_velocities"):
+            found = json.loads(path.read_text())
+            if not isinstance(found, dict):
+                raise ValueError("not a JSON object (not a report of copycat_analysis.py)")
+            if not found.get("hide_velocities"):
                 seed, report = read_report(path, REMADE, hidden=False)
                 if seed in references:
                     raise ValueError(f"a second report of seed {seed} (the first, by path, is kept)")
                 references[seed] = report
-        except (ValueError, OSError, UnicodeDecodeError, AttributeError) as error:  # JSONDecodeError is a ValueError
+        except (ValueError, OSError) as error:  # JSONDecodeError, UnicodeDecodeError: ValueErrors
             problems.append(f"left out reference {path}: {error}")
-    return reports, references, problems
+    if not references:  # a folder without them leaves the paper's setting out of the ζ table
+        where = f"under {reference_dir}"
+        problems.append(f"no report at the paper's setting {where}: its column shows —")
+    return references, problems
 
 
 def run_scores(h3_dir: Path, results_dir: Path) -> tuple:
@@ -161,11 +178,21 @@ def main(argv=None) -> int:
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR, help=f"the regime map, with the control (default {RESULTS_DIR})")
     parser.add_argument("--reference", type=Path, default=REFERENCE_DIR, help=f"the reports at the paper's setting (default {REFERENCE_DIR})")
     args = parser.parse_args(argv)
-    if not args.reference.is_dir():
-        raise UsageError(f"reference folder {args.reference} not found: pass --reference, the folder of the reports at the paper's setting")
-    reports, references, problems = gather(args.analysis_dir, args.reference)
+    fix = "pass --reference, the folder of the reports at the paper's setting"
+    aggregate.check_folder(args.reference, "reference folder", fix)
+    # Mistyped run folders would show every score as —, with only a warning per seed.
+    existing_runs_dir(REGIME, args.h3_dir, "--h3-dir")
+    existing_runs_dir(REGIME, args.results_dir)
+    reports, problems = gather(args.analysis_dir)
     if not reports:
-        raise UsageError(f"no valid {args.analysis_dir}/seed<S>/copycat_analysis.json: run copycat_analysis.py as docs/regimes.md shows")
+        for problem in problems:  # why each report found was left out
+            print(problem, file=sys.stderr)
+        left_out = " (see above)" if problems else ""
+        wanted = f"{args.analysis_dir}/seed<S>/copycat_analysis.json"
+        fix = "run copycat_analysis.py as docs/regimes.md shows"
+        raise UsageError(f"no valid {wanted}{left_out}: {fix}")
+    references, more = gather_references(args.analysis_dir, args.reference)
+    problems += more
     ours, mapped, more = run_scores(args.h3_dir, args.results_dir)
     problems += more
     for seed in sorted(reports):

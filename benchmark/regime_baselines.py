@@ -234,7 +234,8 @@ def comparison_lines(cells: dict) -> list:
     return lines
 
 
-def markdown(cells: dict, experts: dict, problems: list, command: str, results_dir: Path) -> str:
+def markdown(cells: dict, experts: dict, problems: list, command: str, results_dir: Path,
+             adversary: dict) -> str:
     """table2.md: how it was made, the per-env tables, the declared comparisons, the count and its reading, left out."""
     everything = [record for records in cells.values() for record in records]
     folders = {regime: (runs_dir(regime, results_dir), [r for (g, _), records in cells.items() if g == regime for r in records])
@@ -264,12 +265,23 @@ def markdown(cells: dict, experts: dict, problems: list, command: str, results_d
     lines += method_table(cells[CONTROL_REGIME, CONTROL_ENV], CONTROL_METHODS, experts, CONTROL_ENV, paper=False)
     lines += comparison_lines(cells)
     lines += ["## How many separated, and what that means", ""] + reading(cells) + [""]
-    lines += adversary_lines(results_dir)
+    lines += adversary_lines(adversary)
     lines += ["## Left out", ""] + ([f"- {problem}" for problem in problems] or ["none"]) + [""]
     return "\n".join(lines)
 
 
-def adversary_lines(results_dir: Path) -> list:
+def adversary_runs(results_dir: Path) -> tuple:
+    """({env: {seed: (score, adversary curve)}} of FCA's finished seeds 1-5 in native_hidden, and
+    a line per seed of those left out (fca_compare.runs)."""
+    found = {}
+    problems = []
+    for env in ENVS:
+        found[env], more = fca_compare.runs(runs_dir(REGIME, results_dir), env, SEEDS)
+        problems += more
+    return found, problems
+
+
+def adversary_lines(adversary: dict) -> list:
     """FCA's adversary over training in native_hidden (reported, not a test): per env, from the logs of its finished
     seeds 1-5, the range of each seed's largest adversary error and how many seeds exceed the bound that FCA's Table 2
     cells declared for divergence (fca_compare.DIVERGED_ABOVE: predictions outside the action bounds)."""
@@ -279,8 +291,7 @@ def adversary_lines(results_dir: Path) -> list:
              f"| env | FCA mean ± std (seeds) | largest adversary error, range over seeds | seeds above "
              f"{fca_compare.DIVERGED_ABOVE:g} |", "|---|---:|---:|---:|"]
     for env in ENVS:
-        found = fca_compare.runs(runs_dir(REGIME, results_dir), env)
-        lines.append(f"| {env} | {fca_compare.row({seed: run for seed, run in found.items() if seed in SEEDS})} |")
+        lines.append(f"| {env} | {fca_compare.row(adversary[env])} |")
     return lines + [""]
 
 
@@ -328,14 +339,22 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     existing_runs_dir(REGIME, args.results_dir)
     cells, problems = gather(args.results_dir)
+    adversary, adversary_problems = adversary_runs(args.results_dir)
+    # a result that gather left out too is listed once
+    problems += [problem for problem in adversary_problems if problem not in problems]
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, ENVS)
     problems += expert_problems
     for problem in problems:
         print(problem, file=sys.stderr)
     if not any(cells.values()):
-        raise UsageError(f"no valid results of this comparison under {args.results_dir} (see above)")
+        if any(problem.startswith("left out ") for problem in problems):
+            raise UsageError(f"no valid results of this comparison under {args.results_dir} (see above)")
+        folder = args.results_dir
+        raise UsageError(f"no results of this comparison under {folder}: pass --results-dir, the "
+                         "folder python -m benchmark.regimes wrote them into")
     command = " ".join(["python -m benchmark.regime_baselines", *(argv if argv is not None else sys.argv[1:])])
-    table, out = markdown(cells, experts, problems, command, args.results_dir), args.results_dir / REGIME
+    table = markdown(cells, experts, problems, command, args.results_dir, adversary)
+    out = args.results_dir / REGIME
     write_text(out / "table2.md", table)
     plot(cells, out / "table2.png")
     print(table)

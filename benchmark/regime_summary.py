@@ -67,7 +67,12 @@ def expert_scores(expert_runs: Path, envs=ENVS):
     for env in envs:
         path = expert_runs / EXPERT / env / "result_seeds0.json"
         try:
-            scores[env] = statistics.fmean(entry["score"] for entry in read_result(path, EXPERT, env)["scores"].values())
+            result = read_result(path, EXPERT, env)
+            score = statistics.fmean(entry["score"] for entry in result["scores"].values())
+            if score <= 0:  # a share of it would divide by 0, or flip its sign
+                reason = f"its score {score:g} is not above 0 (a share of it would mean nothing)"
+                raise ResultError(reason)
+            scores[env] = score
         except ResultError as error:
             problems.append(f"no expert score for {env} ({path}: {error}): its expert-normalised means are left out")
     return scores, problems
@@ -166,12 +171,17 @@ def main(argv=None) -> int:
     parser.add_argument("--page", type=Path, nargs="?", const=PAGE,
                         help=f"also put the summary and plot into this page (alone: {PAGE}), between {PAGE_START} and {PAGE_END}")
     args = parser.parse_args(argv)
-    if not args.results_dir.is_dir():
-        raise UsageError(f"results folder {args.results_dir} not found: run python -m benchmark.regimes first, or pass --results-dir")
+    fix = "run python -m benchmark.regimes first, or pass --results-dir"
+    aggregate.check_folder(args.results_dir, "results folder", fix)
     if args.page:
         aggregate.page_parts(args.page, PAGE_START, PAGE_END)  # check the markers before anything is written
+    regimes = [regime for regime in REGIMES if runs_dir(regime, args.results_dir).is_dir()]
+    if not regimes:  # not the folder benchmark.regimes wrote: a regime's own, results/runs, ...
+        names = ", ".join(REGIMES)
+        raise UsageError(f"no <regime>/runs/ folder under {args.results_dir} ({names}): pass the "
+                         "folder python -m benchmark.regimes wrote (--results-dir), or run it")
     tables, empty, problems = {}, [], []
-    for regime in [regime for regime in REGIMES if runs_dir(regime, args.results_dir).is_dir()]:
+    for regime in regimes:
         records, regime_problems = collect(regime, args.results_dir)
         problems += regime_problems
         if records:

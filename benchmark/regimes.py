@@ -41,11 +41,13 @@ def runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
     return Path(results_dir) / regime / "runs"
 
 
-def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
-    """runs_dir(regime, results_dir), refused in one line when the regime has not been run there."""
+def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR, flag="--results-dir") -> Path:
+    """runs_dir(regime, results_dir), refused in one line when the regime has not been run there
+    (flag: the option that named results_dir)."""
     folder = runs_dir(regime, results_dir)
     if not folder.is_dir():
-        raise UsageError(f"no {folder}: run python -m benchmark.regimes --regimes {regime} first, or pass --results-dir")
+        run = f"python -m benchmark.regimes --regimes {regime}"
+        raise UsageError(f"no {folder}: run {run} first, or pass {flag}")
     return folder
 
 
@@ -92,6 +94,7 @@ def main(argv=None) -> int:
     parser.add_argument("--save-model", action="store_true", help="save each run's model beside its result (for copycat_analysis.py)")
     parser.add_argument("--dry-run", action="store_true", help="list what would run")
     args = parser.parse_args(argv)
+    run_grid.check_distinct("--regimes", args.regimes)  # else its grid would run twice
     commit = scripts_commit(args.scripts_dir)
     status = 0
     for regime in args.regimes:

@@ -10,14 +10,18 @@ DAgger 468,100 (then four rounds of 100 epochs on the growing aggregate). Result
 before the runners wrote one) are counted, not used: the machine they ran on is unknown. Each row also names the commit
 of the scripts that made its runs (the nearest commit.txt above them, which the grid's runs keep): the scripts' speed
 changed over time (fused Adam, 654be24, made a step about 0.73x as long).
+A result that does not read, or whose ms_per_step is not a positive number, is named on stderr
+and left out.
 """
 import json
+import math
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark.aggregate import check_writable
 from benchmark.results import OneLineParser, UsageError, run_cli, write_text
 
 HOPPER_STEPS = {"dagger": 468_100}
@@ -44,29 +48,39 @@ def commit_of(path: Path, results_dir: Path) -> str:
 
 
 def collect(results_dir) -> tuple:
-    """({(run, machine, commit): [ms per step of each seed]}, results without a machine record). A run is the folder
-    above the env's (e.g. `c2f`, `c2f_no_coarse`): the method with the flags its grid gave it, prefixed by the result's
-    method where the folder does not start with it."""
+    """({(run, machine, commit): [ms per step of each seed]}, results without a machine record,
+    a line per result left out: one that does not read, or whose ms_per_step is not a positive
+    number). A run is the folder above the env's (e.g. `c2f`, `c2f_no_coarse`): the method with
+    the flags its grid gave it, prefixed by the result's method where the folder does not start
+    with it."""
     times, unknown = defaultdict(list), 0
+    problems = []
     for path in sorted(Path(results_dir).rglob("result_seeds*.json")):
         try:
             result = json.loads(path.read_text())
-            entries = list(result["scores"].values())
-        except (ValueError, KeyError, AttributeError):
-            continue  # not a result of ours
+        except (OSError, ValueError) as error:  # JSONDecodeError, UnicodeDecodeError: ValueErrors
+            problems.append(f"left out {path}: unreadable JSON ({type(error).__name__}: {error})")
+            continue
+        scores = result.get("scores") if isinstance(result, dict) else None
+        if not isinstance(scores, dict):
+            problems.append(f"left out {path}: not a result (no scores object)")
+            continue
+        entries = list(scores.values())
         if len(entries) != 1:
             continue  # a summary of several seeds: its seeds have files of their own
-        try:
-            ms = float(entries[0]["ms_per_step"])
-        except (TypeError, KeyError, ValueError):
-            continue  # no training loop of its own (the expert's evaluation), or not a number
+        if not isinstance(entries[0], dict) or "ms_per_step" not in entries[0]:
+            continue  # no training loop of its own (the expert's evaluation)
+        ms = entries[0]["ms_per_step"]
+        if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not 0 < ms < math.inf:
+            problems.append(f"left out {path}: ms_per_step {ms!r} is not a positive number")
+            continue
         if not isinstance(result.get("machine"), dict):
             unknown += 1
             continue
         run, method = path.parent.parent.name, str(result.get("method", ""))
         run = run if run.startswith(method) else f"{method}/{run}"  # e.g. ensemble_twins/bc_so: its members' kind
         times[run, machine_name(result["machine"]), commit_of(path, Path(results_dir))].append(ms)
-    return dict(times), unknown
+    return dict(times), unknown, problems
 
 
 def table(times: dict, unknown: int, command: str) -> str:
@@ -97,7 +111,10 @@ def main(argv=None) -> int:
     options = parser.parse_args(argv)
     if not Path(options.results_dir).is_dir():
         raise UsageError(f"--results-dir {options.results_dir} is not a folder: pass the folder of the committed runs")
-    times, unknown = collect(options.results_dir)
+    check_writable(options.out, "--out", is_file=True)
+    times, unknown, problems = collect(options.results_dir)
+    for problem in problems:
+        print(problem, file=sys.stderr)
     if not times:
         raise UsageError(f"no result under {options.results_dir} has a machine record: run the grid runner first")
     command = "python -m benchmark.seed_times" + (

@@ -310,13 +310,20 @@ def main(argv=None) -> int:
     parser.add_argument("--expert-runs", type=Path, default=Path("results/runs"), help="holds expert/<env>/result_seeds0.json (default results/runs)")
     args = parser.parse_args(argv)
     existing_runs_dir(REGIME, args.results_dir)
+    # A mistyped folder would leave the capacity test at the map's seeds, with only a warning.
+    fix = f"pass --replication-dir, the folder whose {REGIME}/runs/ holds C2F and BC-OH seeds 6-10"
+    aggregate.check_folder(args.replication_dir, "replication folder", fix)
     records, replication, problems = gather(args.results_dir, args.replication_dir)
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, [ENV])
     problems += expert_problems
     for problem in problems:
         print(problem, file=sys.stderr)
     if not records and not replication:
-        raise UsageError(f"no valid {REGIME} {ENV} results under {args.results_dir} or {args.replication_dir} (see above)")
+        where = f"{args.results_dir} or {args.replication_dir}"
+        if any(problem.startswith("left out ") for problem in problems):
+            raise UsageError(f"no valid {REGIME} {ENV} results under {where} (see above)")
+        raise UsageError(f"no {REGIME} {ENV} results under {where}: pass --results-dir, the folder "
+                         "python -m benchmark.regimes wrote them into")
     folders = {"map": (runs_dir(REGIME, args.results_dir), records), "replication": (runs_dir(REGIME, args.replication_dir), replication)}
     command = " ".join(["python -m benchmark.table3", *(argv if argv is not None else sys.argv[1:])])
     table, out = markdown(records, replication, folders, experts.get(ENV), problems, command), args.results_dir / REGIME

@@ -538,6 +538,34 @@ def test_aggregator_without_valid_results_is_one_line(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("flags, message", [
+    # "no valid results ... (see above)", with nothing above
+    (["--results-dir", "empty"], "no <method>/<env>/result_seeds*.json under {tmp}/empty: pass the folder "
+     "python -m benchmark.run_grid wrote (--results-dir), or run it"),
+    # "results folder ... not found", of a file that is there
+    (["--results-dir", "file"], "results folder {tmp}/file is a file, not a folder: run python -m "
+     "benchmark.run_grid first, or pass --results-dir"),
+    # "cannot use ...: File exists"
+    (["--out", "file/results"], "--out {tmp}/file/results cannot be written: {tmp}/file is not a "
+     "folder: pass another --out"),
+    # a UnicodeDecodeError traceback (the picture named for the page)
+    (["--page", "table2.png"], "page {tmp}/table2.png is not text (not UTF-8): pass the markdown "
+     "page to --page"),
+    # "page ... not found", of a folder that is there
+    (["--page", "empty"], "page {tmp}/empty is a folder: pass the markdown page itself to --page"),
+])
+def test_aggregator_paths_that_cannot_be_used_are_one_line(tmp_path, flags, message):
+    plant(tmp_path / "runs", "c2f", "Ant-v4", 1, [4000.0, 5000.0, 6000.0])
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "file").write_text("not a folder\n")
+    (tmp_path / "table2.png").write_bytes(b"\x89PNG\r\n\x1a\n\xff")
+    paths = {"--results-dir": tmp_path / "runs", "--out": tmp_path / "out"}
+    paths.update({flag: tmp_path / name for flag, name in zip(flags[::2], flags[1::2])})
+    result = run_in_process("benchmark/aggregate.py", *[word for pair in paths.items() for word in pair])
+    refused(result, message.format(tmp=tmp_path))
+    assert not (tmp_path / "out").exists()
+
+
 
 def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_they_cannot_time(tmp_path):
     """benchmark.baseline.script_at writes `git show <commit>:<script>.py` (HEAD: the checkout's own file); an unknown

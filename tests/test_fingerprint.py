@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 import torch
-from conftest import BUDGET, FIXED_MODE, PIN_TOLERANCE, PINNED, REPO_ROOT
+from conftest import BUDGET, FIXED_MODE, PIN_TOLERANCE, PINNED, REPO_ROOT, run_in_process
 
 from benchmark import fingerprint, machine
 
@@ -171,6 +171,43 @@ def test_compare_refuses_a_file_that_is_not_a_record(tmp_path, content):
     (tmp_path / "b.json").write_text(content)
     with pytest.raises(fingerprint.UsageError, match=r"b.json is not a fingerprint record \(none of demos, weights, evaluations\)"):
         fingerprint.main(["--compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
+
+
+@pytest.mark.parametrize("part, value", [
+    ("demos", 5), ("weights", ["571d843f3c3f541e"]), ("evaluations", "5.48"), ("evaluations", [5.48, "x"]),
+    ("probes", ["libm"]),
+])
+def test_compare_refuses_a_record_whose_parts_are_not_as_written(tmp_path, part, value):
+    """A demos stage that is a number, or evaluations that are not numbers, ended in a TypeError traceback."""
+    (tmp_path / "a.json").write_text(json.dumps(RECORD))
+    (tmp_path / "b.json").write_text(json.dumps({**RECORD, part: value}))
+    result = run_in_process("benchmark/fingerprint.py", "--compare", tmp_path / "a.json", tmp_path / "b.json")
+    message = f"{tmp_path / 'b.json'} is not a fingerprint record ({part} not as this module writes them): pass one this module wrote"
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
+
+
+@pytest.mark.parametrize("content, reason", [
+    (None, "No such file or directory"),
+    ("{cut", "not JSON: Expecting property name enclosed in double quotes: line 1 column 2 (char 1)"),
+])
+def test_a_record_that_cannot_be_read_is_one_line_with_its_fix(tmp_path, content, reason):
+    """It named the problem but not what to pass instead."""
+    if content is not None:
+        (tmp_path / "b.json").write_text(content)
+    result = run_in_process("benchmark/fingerprint.py", "--compare", tmp_path / "b.json")
+    message = f"cannot read the record {tmp_path / 'b.json'} ({reason}): pass one this module wrote"
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
+
+
+def test_an_out_folder_that_cannot_be_written_is_refused_before_the_run(tmp_path, monkeypatch):
+    """It ran the case (a minute) and then failed to write the record."""
+    (tmp_path / "a.json").write_text(json.dumps(RECORD))
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(fingerprint, "measure", lambda mode: pytest.fail("measured before --out was checked"))
+    with pytest.raises(fingerprint.UsageError) as refusal:
+        fingerprint.main(["--compare", str(tmp_path / "a.json"), "--out", str(tmp_path / "file" / "records")])
+    message = f"--out {tmp_path / 'file' / 'records'} cannot be written: {tmp_path / 'file'} is not a folder: pass another --out"
+    assert str(refusal.value) == message
 
 
 def test_the_stored_amd_epyc_record_is_the_pins_bit_for_bit():

@@ -4,7 +4,7 @@ import json
 import shutil
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error, plant_run, run_module
+from conftest import REPO_ROOT, assert_usage_error, plant_run, run_in_process, run_module
 
 from benchmark import h3
 from benchmark.regimes import runs_dir
@@ -113,6 +113,59 @@ def test_a_mistyped_reference_folder_is_one_line_and_exit_2(planted, tmp_path):
     result = run_module("benchmark.h3", *argv)
     assert_usage_error(result, f"reference folder {tmp_path / 'nowhere'} not found: pass --reference")
     assert result.returncode == 2 and not (analysis / "h3.md").exists()
+
+
+@pytest.mark.parametrize("flag", ["--h3-dir", "--results-dir"])
+def test_a_mistyped_run_folder_is_one_line_and_exit_2(planted, tmp_path, flag):
+    """It showed every score of those runs as —, with a warning per seed, and exit status 0."""
+    argv, analysis, _ = planted
+    argv = [*argv]
+    argv[argv.index(flag) + 1] = str(tmp_path / "nowhere")
+    result = run_in_process("benchmark/h3.py", *argv)
+    message = (f"no {tmp_path / 'nowhere' / 'native_hidden' / 'runs'}: run python -m benchmark.regimes --regimes "
+               f"native_hidden first, or pass {flag}")
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
+    assert not (analysis / "h3.md").exists()
+
+
+def test_a_reference_that_is_a_file_is_one_line_that_says_so(planted, tmp_path):
+    """It said 'not found', of a file that is there."""
+    argv, _, _ = planted
+    argv = [*argv]
+    argv[argv.index("--reference") + 1] = str(write(tmp_path / "reference.json", "{}"))
+    result = run_in_process("benchmark/h3.py", *argv)
+    message = (f"reference folder {tmp_path / 'reference.json'} is a file, not a folder: pass --reference, the folder "
+               "of the reports at the paper's setting")
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
+
+
+def test_when_no_report_reads_each_is_named_before_the_one_line(tmp_path):
+    """It said only that none was valid, as if there were none."""
+    analysis = tmp_path / "analysis"
+    cut = write(analysis / "seed1" / "copycat_analysis.json", "{cut")
+    for folder in ("h3", "regimes"):
+        runs_dir("native_hidden", tmp_path / folder).mkdir(parents=True)
+    result = run_in_process("benchmark/h3.py", "--analysis-dir", analysis, "--reference", tmp_path, "--h3-dir",
+                            tmp_path / "h3", "--results-dir", tmp_path / "regimes")
+    assert result.returncode == 2 and result.stderr.splitlines() == [
+        f"left out {cut}: unreadable report (JSONDecodeError: Expecting property name enclosed in double quotes: line 1 "
+        "column 2 (char 1))",
+        f"error: no valid {analysis}/seed<S>/copycat_analysis.json (see above): run copycat_analysis.py as "
+        "docs/regimes.md shows"]
+
+
+def test_a_reference_folder_without_a_report_says_so(planted, tmp_path, capsys):
+    """A folder holding no report at the paper's setting left its column out without a word; a report that is a JSON
+    list was told as "'list' object has no attribute 'get'"."""
+    argv, analysis, _ = planted
+    argv = [*argv]
+    listed = write(tmp_path / "elsewhere" / "copycat_analysis.json", "[]")
+    argv[argv.index("--reference") + 1] = str(tmp_path / "elsewhere")
+    assert h3.main(argv) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert f"left out reference {listed}: not a JSON object (not a report of copycat_analysis.py)" in err
+    assert f"no report at the paper's setting under {tmp_path / 'elsewhere'}: its column shows —" in err
+    assert f"- no report at the paper's setting under {tmp_path / 'elsewhere'}: its column shows —" in (analysis / "h3.md").read_text()
 
 
 def test_the_committed_h3_page_is_what_the_tool_makes_from_the_committed_reports(tmp_path):

@@ -7,6 +7,7 @@ from conftest import (
     assert_usage_error,
     plant_expert,
     plant_run,
+    run_in_process,
     run_module,
     set_machine,
 )
@@ -229,3 +230,32 @@ def test_fca_s_adversary_is_reported_by_the_declared_divergence_bound(planted):
     part = section(summarise(results, experts), "## FCA's adversary (reported, not a test)", "## Left out")
     assert f"| {HOPPER} | 2000 ± 0 (n=5) | 0.1–4.5 | 1 of 5 |" in part
     assert f"| {WALKER} | 3000 ± 0 (n=4) | 0.05–0.09 | 0 of 4 |" in part
+
+
+def test_fca_logs_that_cannot_be_read_are_left_out_and_listed(planted):
+    """A log not named seed<S>.log ended in a ValueError traceback; one without an adversary error (cut short) was
+    counted as a seed that never diverged."""
+    results, experts, _ = planted
+    fca = runs_dir("native_hidden", results) / "fca" / HOPPER
+    for seed in range(1, 6):
+        (fca / f"seed{seed}.log").write_text(f"seed {seed} | epoch 50/1000 | loss 0.01 | adversary error 0.1\n")
+    (fca / "seed2.log").write_text("")
+    (fca / "seed1.old.log").write_text("seed 1 | epoch 50/1000 | loss 0.01 | adversary error 99.0\n")
+    table = summarise(results, experts)
+    assert f"| {HOPPER} | 2000 ± 0 (n=4) | 0.1–0.1 | 0 of 4 |" in section(table, "## FCA's adversary", "## Left out")
+    left_out = section(table, "## Left out", "\n\n\n").splitlines()
+    assert f"- left out {fca / 'seed1.old.log'}: not a run's log (seed<S>.log)" in left_out
+    assert f"- left out {fca / 'seed2.log'}: no adversary error in its progress lines" in left_out
+
+
+def test_folders_without_runs_are_one_line_that_says_so(tmp_path):
+    """It said '(see above)', with nothing above."""
+    for regime in ("native_hidden", "fs1_noise"):
+        runs_dir(regime, tmp_path / "regimes").mkdir(parents=True)
+    for env in (HOPPER, WALKER):
+        plant_expert(tmp_path / "runs", env, 1000.0)
+    result = run_in_process("benchmark/regime_baselines.py", "--results-dir", tmp_path / "regimes", "--expert-runs",
+                            tmp_path / "runs")
+    message = (f"no results of this comparison under {tmp_path / 'regimes'}: pass --results-dir, the folder "
+               "python -m benchmark.regimes wrote them into")
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")

@@ -5,7 +5,7 @@ import platform
 import subprocess
 
 import pytest
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, run_in_process
 
 from benchmark import aggregate, machine, regimes, run_grid
 from benchmark.paper import VARIANTS, as_flags, paper_settings, setting_differences
@@ -113,6 +113,13 @@ def test_bad_flags_stop_the_regimes_before_a_commit_is_recorded(checkout, tmp_pa
         regimes.main(["--regimes", "fs1_hidden", "--methods", "nope", "--envs", "Hopper-v4", "--seeds", "1",
                       "--scripts-dir", str(checkout), "--results-dir", str(tmp_path / "map")])
     assert not list((tmp_path / "map").rglob("commit.txt"))
+
+
+def test_a_regime_named_twice_is_one_line(tmp_path):
+    """Its grid ran twice, one after the other (run_grid refuses a method, env or seed named twice)."""
+    result = run_in_process("benchmark/regimes.py", "--regimes", "fs1_noise", "native_hidden", "fs1_noise",
+                            "--results-dir", tmp_path, "--dry-run")
+    assert (result.returncode, result.stderr, result.stdout) == (2, "error: --regimes lists fs1_noise twice: name each once\n", "")
 
 
 TABLE3 = ["c2f_output", "c2f_middle", "c2f_early", "c2f_penultimate", "c2f_feature", "c2f_coarse_history",

@@ -2,7 +2,7 @@
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT, assert_usage_error, plant, run_module, summarise
+from conftest import REPO_ROOT, assert_usage_error, plant, run_in_process, run_module, summarise
 
 from benchmark import aggregate, regime_summary
 from benchmark.regimes import runs_dir
@@ -145,6 +145,38 @@ def test_bad_input_is_one_line_and_exit_2(regime_map, tmp_path):
     result = cli("--results-dir", results, "--expert-runs", tmp_path / "nowhere")
     assert_usage_error(result, f"no expert/ folder in {tmp_path / 'nowhere'}: pass --expert-runs")
     assert result.returncode == 2 and not (results / "summary.md").exists()
+
+
+@pytest.mark.parametrize("score", [0.0, -5.0])
+def test_an_expert_score_not_above_0_leaves_the_shares_of_it_out(regime_map, capsys, score):
+    """Hopper's expert at 0 ended in a ZeroDivisionError traceback; below 0 it turned every share's sign."""
+    import json
+
+    from benchmark.results import make_result, result_path
+
+    results, experts, _ = regime_map
+    path = result_path(experts, "expert", "Hopper-v4", [0])
+    path.write_text(json.dumps(make_result("Hopper-v4", "expert", {"env": "Hopper-v4", "seeds": [0]}, {0: [[0, score]]})))
+    assert summarise(results, experts) == 0
+    assert (f"no expert score for Hopper-v4 ({path}: its score {score:g} is not above 0 (a share of it would mean "
+            "nothing)): its expert-normalised means are left out") in capsys.readouterr().err.splitlines()
+    summary = (results / "summary.md").read_text()
+    assert "| Hopper-v4 | BC-OH | 300 | [200, 400] | n=2, incomplete | — |" in summary
+    assert "| Walker2d-v4 | BC-OH | 80 | [80, 80] | n=1, incomplete | 0.20 |" in summary
+
+
+@pytest.mark.parametrize("folder, message", [
+    # "no valid regime results under ... (see above)", with nothing above: a regime's own folder passed
+    ("results/regimes/native_noise", "no <regime>/runs/ folder under {tmp}/results/regimes/native_noise (native_noise, "
+     "fs1_noise, native_hidden, fs1_hidden): pass the folder python -m benchmark.regimes wrote (--results-dir), or run it"),
+    # "results folder ... not found", of a file that is there
+    ("results/regimes/native_noise/README.md", "results folder {tmp}/results/regimes/native_noise/README.md is a file, "
+     "not a folder: run python -m benchmark.regimes first, or pass --results-dir"),
+])
+def test_a_results_dir_that_is_not_the_maps_is_one_line(regime_map, tmp_path, folder, message):
+    _, experts, _ = regime_map
+    result = run_in_process("benchmark/regime_summary.py", "--results-dir", tmp_path / folder, "--expert-runs", experts)
+    assert (result.returncode, result.stderr) == (2, f"error: {message.format(tmp=tmp_path)}\n")
 
 
 def test_no_valid_results_is_exit_2(tmp_path):

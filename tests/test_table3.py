@@ -9,6 +9,7 @@ from conftest import (
     plant,
     plant_expert,
     plant_run,
+    run_in_process,
     run_module,
     set_machine,
 )
@@ -234,3 +235,26 @@ def test_no_map_folder_is_one_line_and_exit_2(tmp_path):
     result = run_module("benchmark.table3", "--results-dir", tmp_path / "nowhere")
     assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
     assert result.returncode == 2
+
+
+def test_a_mistyped_replication_folder_is_one_line_and_exit_2(planted, tmp_path):
+    """It left the capacity test at the map's seeds 1-5, with a warning, and exit status 0."""
+    results, _, experts, _ = planted
+    result = run_in_process("benchmark/table3.py", "--results-dir", results, "--replication-dir", tmp_path / "nowhere",
+                            "--expert-runs", experts)
+    message = (f"replication folder {tmp_path / 'nowhere'} not found: pass --replication-dir, the folder whose "
+               "native_hidden/runs/ holds C2F and BC-OH seeds 6-10")
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
+    assert not (results / "native_hidden" / "table3.md").exists()
+
+
+def test_folders_without_runs_are_one_line_that_says_so(tmp_path):
+    """It said '(see above)', with nothing above."""
+    for folder in ("map", "replication"):
+        runs_dir("native_hidden", tmp_path / folder).mkdir(parents=True)
+    plant_expert(tmp_path / "runs", ENV, 1000.0)
+    result = run_in_process("benchmark/table3.py", "--results-dir", tmp_path / "map", "--replication-dir",
+                            tmp_path / "replication", "--expert-runs", tmp_path / "runs")
+    message = (f"no native_hidden Hopper-v4 results under {tmp_path / 'map'} or {tmp_path / 'replication'}: pass "
+               "--results-dir, the folder python -m benchmark.regimes wrote them into")
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
