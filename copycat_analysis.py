@@ -36,6 +36,7 @@ import json
 import os
 import signal
 import sys
+import warnings
 from dataclasses import asdict, dataclass
 from types import SimpleNamespace
 from typing import Optional
@@ -108,7 +109,8 @@ class Args:
     """held-out demo steps to generate when --demos is not given"""
     obs_noise_std: Optional[float] = None
     """std of the velocity noise on the demos' and the rollouts' observations (default: the models'
-    training value; models trained with --hide-velocities get zeroed velocities instead)"""
+    training value; models trained with --hide-velocities get zeroed velocities instead, and refuse
+    it)"""
     history: Optional[int] = None
     """frames in the history (default: the models'; it must be the BC-OH and C2F models' own)"""
     eval_episodes: int = 3
@@ -397,13 +399,19 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
     or a fresh expert rollout from reset seed --seed: states the policies were not trained on."""
     # The whole file; batch_size 1: any file of two steps or more.
     if args.demos is not None:
+        # load_demos would call a folder not found.
+        if os.path.isdir(args.demos):
+            raise UsageError(f"--demos {args.demos} is a folder: pass a .npz file")
         # The models' rate (None: the env's own).
         rate = frame_skip or getattr(env.unwrapped, "frame_skip", None)
         given = SimpleNamespace(
             env=args.env, demos=args.demos, num_demo_samples=None, batch_size=1, frame_skip=rate
         )
         try:
-            return load_demos(given, env)[0]
+            # One-step episodes have no copy error (numpy warns of a nan): run() refuses them.
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return load_demos(given, env)[0]
         except UsageError as error:
             # The method files' fixes name their own flags: here the models set the env and the
             # rate, and a file of two steps or more will do.
@@ -416,7 +424,10 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
                 problem = message.partition(": pass --env")[0]
                 raise UsageError(f"{problem}: pass --demos of {args.env}, the models' env")
             if "use a smaller --batch-size" in message:
-                raise UsageError(f"{args.demos} holds one step: pass --demos of two steps or more")
+                steps = "one step"
+                if message.startswith(f"{args.demos}: 0 steps"):
+                    steps = "no step"
+                raise UsageError(f"{args.demos} holds {steps}: pass --demos of two steps or more")
             raise
     expert_path = args.expert.format(env=args.env)
     if not os.path.isfile(expert_path):
@@ -657,6 +668,9 @@ def load_model(
         flag = "--control"
         script = "c2f_table3.py"
         what = "capacity control"
+    if os.path.isdir(path):
+        example = os.path.join(path, "seed1.pt")
+        raise UsageError(f"{flag} {path} is a folder: pass the model file in it, e.g. {example}")
     if not os.path.isfile(path):
         folder, name = os.path.split(path)
         seed = "1"
@@ -676,9 +690,13 @@ def load_model(
         saved_method = checkpoint["method"]
         saved_env = checkpoint["env_id"]
         saved = checkpoint["args"]
+        weights = checkpoint["state_dict"]
     except Exception as error:
         problem = f"{flag} {path} is not a model saved with --save-model ({type(error).__name__})"
         raise UsageError(f"{problem}: pass a seed<S>.pt written by {script}")
+    problem = checkpoint_problem(saved_method, saved_env, saved, weights)
+    if problem:
+        raise UsageError(f"{flag} {path}: {problem}: re-save it with {script}")
     if saved_method not in accepted:
         raise UsageError(
             f"{flag} {path} is a {saved_method} model, not {method}: "
@@ -692,6 +710,12 @@ def load_model(
     if method == "c2f":
         # c2f.py's models record no Table 3 flag: they are c2f_table3.py's at its defaults.
         saved = {**TABLE3_DEFAULTS, **saved}
+        for name, default in TABLE3_DEFAULTS.items():
+            if type(saved[name]) is not type(default):
+                raise UsageError(
+                    f"{flag} {path}: its args hold {name} {saved[name]!r}, which is not a "
+                    f"{type(default).__name__}: re-save it with {script}"
+                )
         if saved["coarse_action"] and control:
             raise UsageError(
                 f"{flag} {path} is a {saved_method} model trained without --no-coarse-action: "
@@ -709,8 +733,25 @@ def load_model(
             )
     history = saved["history"]
     hidden = saved["hidden"]
+    does_not_fit = UsageError(
+        f"{flag} {path}: its weights do not fit a {method} policy with history {history} "
+        f"and hidden {hidden} on {env_id}'s {obs_dim}-d observations: re-save it with {script}"
+    )
+    # The sizes are checked on the weights before the policy is built: an edited history or
+    # hidden asked for terabytes. BC-SO normalizes o_t only.
+    normalized = obs_dim * history
+    first_layer = weights.get("net.0.weight")
+    if method == "bc_so":
+        normalized = obs_dim
+    if method == "c2f":
+        first_layer = weights.get("coarse.0.weight")
+    mean = weights.get("normalize.mean")
+    if mean is None or mean.shape != (normalized,):
+        raise does_not_fit
+    if first_layer is None or first_layer.shape[0] != hidden:
+        raise does_not_fit
     # The Normalizer's statistics come from the state_dict.
-    inputs = torch.zeros(2, obs_dim * history)
+    inputs = torch.zeros(2, normalized)
     if method == "bc_so":
         policy = SOPolicy(obs_dim, act_dim, history, hidden, inputs)
     elif method == "bc_oh":
@@ -718,13 +759,64 @@ def load_model(
     else:
         policy = C2FPolicy(obs_dim, act_dim, inputs, SimpleNamespace(**saved))
     try:
-        policy.load_state_dict(checkpoint["state_dict"])
+        policy.load_state_dict(weights)
     except RuntimeError:
-        raise UsageError(
-            f"{flag} {path}: its weights do not fit a {method} policy with history {history} "
-            f"on {env_id}'s {obs_dim}-d observations: re-save it with {script}"
-        )
+        raise does_not_fit
+    # A training that diverged saves nan weights: every measure of the analysis would be nan.
+    for value in weights.values():
+        if value.is_floating_point() and not torch.isfinite(value).all():
+            raise UsageError(f"{flag} {path}: its weights are not finite: retrain it with {script}")
     return policy.eval(), saved
+
+
+SAVED_SETTINGS = {
+    "history": "a positive int",
+    "hidden": "a positive int",
+    "obs_noise_std": "a number >= 0 and finite",
+    "hide_velocities": "True or False",
+    "frame_skip": "a positive int or None",
+    "velocity_dims": "a list of ints or None",
+}
+"""the training settings the analysis reads from a model, as they must be"""
+OPTIONAL_SETTINGS = {"hide_velocities": False, "frame_skip": None, "velocity_dims": None}
+"""settings that older models may lack, with the value their absence stands for"""
+
+
+def setting_fits(name: str, value) -> bool:
+    """Whether a model's training setting `name` holds what SAVED_SETTINGS says it must."""
+    if name in ("history", "hidden"):
+        return type(value) is int and value > 0
+    if name == "obs_noise_std":
+        return type(value) in (int, float) and 0 <= value < np.inf
+    if name == "hide_velocities":
+        return type(value) is bool
+    if value is None:
+        return True
+    if name == "frame_skip":
+        return type(value) is int and value > 0
+    return type(value) is list and all(type(entry) is int for entry in value)
+
+
+def checkpoint_problem(method, env_id, saved, weights) -> Optional[str]:
+    """What makes a checkpoint's content unusable (a value of the wrong type, or out of range, as an
+    edited or other program's file may hold), or None."""
+    for key, value in [("method", method), ("env_id", env_id)]:
+        if type(value) is not str:
+            return f"its {key} {value!r} is not a str"
+    if not isinstance(saved, dict):
+        return f"its args are a {type(saved).__name__}, not a dict"
+    if not isinstance(weights, dict):
+        return f"its state_dict is a {type(weights).__name__}, not a dict"
+    for name, value in weights.items():
+        if not isinstance(value, torch.Tensor):
+            return f"its state_dict holds a {type(value).__name__} as {name}, not a tensor"
+    for name, wanted in SAVED_SETTINGS.items():
+        if name not in saved and name not in OPTIONAL_SETTINGS:
+            return f"its args have no {name}"
+        value = saved.get(name, OPTIONAL_SETTINGS.get(name))
+        if not setting_fits(name, value):
+            return f"its args hold {name} {value!r}, which is not {wanted}"
+    return None
 
 
 def agreed(saved: dict, key: str, flag: str, readers=None, fix="pass models trained alike"):
@@ -1002,6 +1094,11 @@ def check_args(args):
             "--seed 0 would regenerate the training demonstrations: "
             "use another seed for held-out demos"
         )
+    # An empty --output-dir wrote into this folder, an empty --control ran without the control.
+    for name in ["bc_so", "bc_oh", "c2f", "control", "demos", "expert", "output_dir"]:
+        if getattr(args, name) == "":
+            flag = f"--{name.replace('_', '-')}"
+            raise UsageError(f"{flag} is empty: pass a path, or leave {flag} out")
     # The paths may name the env as {env}; another field failed in str.format, after the analysis.
     for name in ["bc_so", "bc_oh", "c2f", "control", "expert", "output_dir"]:
         template = getattr(args, name)
@@ -1011,6 +1108,40 @@ def check_args(args):
         except (KeyError, IndexError, ValueError):
             flag = f"--{name.replace('_', '-')}"
             raise UsageError(f"{flag} {template}: the one field a path may hold is {{env}}")
+    check_output_dir(args.output_dir.format(env=args.env))
+
+
+def check_output_dir(out_dir: str):
+    """Refuse an --output-dir that cannot be made or written in, before the analysis, not after it
+    (nothing is made here: the nearest path on its way that exists must be a writable folder)."""
+    existing = os.path.abspath(out_dir)
+    while not os.path.lexists(existing):
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        raise UsageError(
+            f"--output-dir {out_dir}: {existing} is not a folder: pass another --output-dir"
+        )
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise UsageError(
+            f"--output-dir {out_dir}: cannot write in {existing}: pass another --output-dir"
+        )
+
+
+def check_actions(actors: dict, paths: dict, histories: np.ndarray, clean: np.ndarray, std: float):
+    """Refuse a policy whose actions on the held-out histories are not finite (its weights are):
+    every measure of it would be nan. `clean`: the histories without the velocity noise."""
+    for method, act in actors.items():
+        if np.isfinite(act(histories)).all():
+            continue
+        flag = "--" + method.replace("_", "-")
+        if method == CONTROL:
+            flag = "--control"
+        problem = f"{flag} {paths[method]} gives non-finite actions on the held-out demos"
+        if np.isfinite(act(clean)).all():
+            fix = "pass a smaller --obs-noise-std"
+            raise UsageError(f"{problem} with velocity noise std {std:g}: {fix}")
+        fix = "pass --demos whose observations lie in the range of its training demos"
+        raise UsageError(f"{problem}, even without noise: {fix}")
 
 
 def run(args):
@@ -1069,12 +1200,34 @@ def run(args):
         std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix=fix)
     frame_skip = agreed(rates, "frame_skip", "--frame-skip")
     hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
+    if hide and args.obs_noise_std is not None:
+        raise UsageError(
+            f"--obs-noise-std {args.obs_noise_std:g}: the models were trained with "
+            "--hide-velocities, so the velocities are zeroed, not noisy: leave --obs-noise-std out"
+        )
+    # do(o_hist) and the scores need steps with a previous action in their episode.
+    episode_steps = env.spec.max_episode_steps
+    if frame_skip:
+        episode_steps = round(episode_steps * native / frame_skip)
+    if episode_steps < 2:
+        raise UsageError(
+            f"the models were trained at frame skip {frame_skip}, at which an episode of "
+            f"{args.env} ends before its second step: pass models of a smaller --frame-skip"
+        )
 
     demos = heldout_demos(args, env, frame_skip)
     if args.demos is not None:
         check_held_out(demos, saved, env, args.env, args.demos)
     actions = demos["actions"].astype(np.float64)
     starts = demos["episode_starts"]
+    # The steps with a previous action in their episode.
+    steps = np.flatnonzero(~starts)
+    if len(steps) == 0:
+        source = args.demos or "the held-out demos"
+        raise UsageError(
+            f"{source}: every step starts an episode, so none has a previous action: "
+            "pass demos whose episodes last two steps or more"
+        )
     # The expert's action scale, per dim.
     scale = actions.std(0).clip(1e-6)
     lo = np.quantile(actions, args.zeta_quantile, axis=0)
@@ -1088,11 +1241,11 @@ def run(args):
         raise UsageError(f"the held-out actions of dims {flat} do not vary {spread}: {fix}")
     observed = partially_observe(demos["observations"], dims, std, hide, args.seed)
     histories = stack_history(observed, starts, history)
-    # The steps with a previous action in their episode.
-    steps = np.flatnonzero(~starts)
+    actors = {method: as_actor(model, low, high) for method, model in models.items()}
+    clean = stack_history(demos["observations"], starts, history)
+    check_actions(actors, paths, histories, clean, std)
     points = changepoints(actions, starts, scale, args.changepoint_quantile)
 
-    actors = {method: as_actor(model, low, high) for method, model in models.items()}
     rollouts = {
         method: [
             rollout(

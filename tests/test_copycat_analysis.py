@@ -429,3 +429,152 @@ def test_an_env_without_a_velocity_layout_is_refused_before_the_models(tmp_path,
     result = run_in_process("copycat_analysis.py", "--env", "Swimmer-v4")
     assert_usage_error(result, "the velocity entries of Swimmer-v4 are unknown")
     assert "train one" not in result.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# Bad input found by fuzzing the command: each refused in one line, exit 2, before the analysis writes anything
+
+
+def refusal(saved, monkeypatch, *flags, **models):
+    """The one stderr line of `copycat_analysis.py` (run in-process on the saved models, those in `models` replaced, and
+    `flags` last) refusing its input: exit 2, no traceback, nothing written to its --output-dir."""
+    workdir, paths = saved
+    monkeypatch.chdir(workdir)
+    result = run_in_process("copycat_analysis.py", *model_flags(paths, **models), "--num-demo-samples", 300, "--eval-episodes", 1,
+                            "--output-dir", "bad", *flags)
+    assert_usage_error(result, "error: ")
+    assert result.returncode == 2
+    assert not (workdir / "bad").exists()
+    return result.stderr.strip()
+
+
+def edited(path, tmp_path, edit):
+    """A copy of the checkpoint at path, changed in place by edit(checkpoint), in tmp_path."""
+    checkpoint = torch.load(path, weights_only=True)
+    edit(checkpoint)
+    torch.save(checkpoint, tmp_path / "edited.pt")
+    return tmp_path / "edited.pt"
+
+
+def test_noise_that_makes_the_actions_non_finite_is_refused(saved, monkeypatch):
+    """--obs-noise-std 1e300 overflows float32: every measure was nan, printed with exit 0."""
+    line = refusal(saved, monkeypatch, "--obs-noise-std", "1e300")
+    assert line == (f"error: --bc-so {saved[1]['bc_so']} gives non-finite actions on the held-out demos with velocity noise std "
+                    "1e+300: pass a smaller --obs-noise-std")
+
+
+def test_non_finite_actions_without_noise_are_blamed_on_the_demos():
+    histories = np.zeros((4, 2))
+    clean = histories.copy()
+    histories[1, 0] = np.inf
+    with pytest.raises(ca.UsageError, match=r"^--bc-oh m.pt gives non-finite actions on the held-out demos with velocity noise std 0.2: pass a"):
+        ca.check_actions({"bc_oh": lambda h: h[:, :1]}, {"bc_oh": "m.pt"}, histories, clean, 0.2)
+    with pytest.raises(ca.UsageError, match=r"^--control c.pt gives non-finite actions on the held-out demos, even without noise: pass --demos"):
+        ca.check_actions({ca.CONTROL: lambda h: h[:, :1]}, {ca.CONTROL: "c.pt"}, histories, histories, 0.2)
+
+
+BAD_CHECKPOINTS = {
+    # A traceback before each of these but the last three: KeyError, TypeError, TypeError, TypeError, TypeError.
+    "no state_dict": (lambda c: c.pop("state_dict"), " is not a model saved with --save-model (KeyError): pass a seed<S>.pt written by bc_oh.py"),
+    "args not a dict": (lambda c: c.update(args="x"), ": its args are a str, not a dict: re-save it with bc_oh.py"),
+    "state_dict not a dict": (lambda c: c.update(state_dict="x"), ": its state_dict is a str, not a dict: re-save it with bc_oh.py"),
+    "history a str": (lambda c: c["args"].update(history="2"), ": its args hold history '2', which is not a positive int: re-save it with bc_oh.py"),
+    "velocity_dims an int": (lambda c: c["args"].update(velocity_dims=5),
+                             ": its args hold velocity_dims 5, which is not a list of ints or None: re-save it with bc_oh.py"),
+    # It said "is a model of 5, not Hopper-v4: ..., or --env 5".
+    "env_id an int": (lambda c: c.update(env_id=5), ": its env_id 5 is not a str: re-save it with bc_oh.py"),
+    # torch asked for 88 TB in a traceback.
+    "hidden huge": (lambda c: c["args"].update(hidden=10**12), ": its weights do not fit a bc_oh policy with history 2 and hidden 1000000000000 "
+                                                               "on Hopper-v4's 11-d observations: re-save it with bc_oh.py"),
+    # A diverged training: every measure of the model was nan, exit 0.
+    "nan weights": (lambda c: c["state_dict"]["net.0.weight"].fill_(np.nan), ": its weights are not finite: retrain it with bc_oh.py"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_CHECKPOINTS))
+def test_corrupt_checkpoints_are_refused_in_one_line(saved, monkeypatch, tmp_path, case):
+    edit, message = BAD_CHECKPOINTS[case]
+    path = edited(saved[1]["bc_oh"], tmp_path, edit)
+    assert refusal(saved, monkeypatch, bc_oh=path) == f"error: --bc-oh {path}{message}"
+
+
+def test_a_control_whose_coarse_action_is_not_a_bool_is_refused(saved, monkeypatch, tmp_path):
+    """A str "False" counted as True: the control was told it was trained without --no-coarse-action."""
+    path = edited(saved[1][ca.CONTROL], tmp_path, lambda c: c["args"].update(coarse_action="False"))
+    line = refusal(saved, monkeypatch, "--control", path)
+    assert line == f"error: --control {path}: its args hold coarse_action 'False', which is not a bool: re-save it with c2f_table3.py"
+
+
+def test_a_folder_in_place_of_a_model_or_the_demos_is_refused(saved, monkeypatch, tmp_path):
+    """They were 'not found', and the model's advice was to train one into the folder's parent."""
+    folder = saved[1]["bc_oh"].parent
+    line = refusal(saved, monkeypatch, bc_oh=folder)
+    assert line == f"error: --bc-oh {folder} is a folder: pass the model file in it, e.g. {folder / 'seed1.pt'}"
+    assert refusal(saved, monkeypatch, "--demos", tmp_path) == f"error: --demos {tmp_path} is a folder: pass a .npz file"
+
+
+@pytest.mark.parametrize("flag", ["--output-dir", "--control"])
+def test_an_empty_path_is_refused(saved, monkeypatch, flag):
+    """An empty --output-dir wrote into the working folder and said it wrote into /; an empty --control was ignored."""
+    assert refusal(saved, monkeypatch, flag, "") == f"error: {flag} is empty: pass a path, or leave {flag} out"
+
+
+def test_an_output_dir_under_a_file_is_refused_before_the_analysis(saved, monkeypatch, tmp_path):
+    """It was refused after the whole analysis, as a file that could not be written (File exists)."""
+    (tmp_path / "file").write_text("")
+    line = refusal(saved, monkeypatch, "--output-dir", tmp_path / "file" / "out")
+    assert line == f"error: --output-dir {tmp_path / 'file' / 'out'}: {tmp_path / 'file'} is not a folder: pass another --output-dir"
+
+
+def demos_without_steps(tmp_path, workdir):
+    with np.load(make_demos("Hopper-v4", 300)) as data:
+        np.savez(tmp_path / "empty.npz", **{key: data[key][:0] for key in ("observations", "actions", "episode_starts")})
+    return tmp_path / "empty.npz"
+
+
+def demos_of_one_step_episodes(tmp_path, workdir):
+    path = rollout_file(tmp_path, workdir, seed=4)
+    with np.load(path) as data:
+        arrays = dict(data)
+    arrays["episode_starts"][:] = True
+    np.savez(path, **arrays)
+    return path
+
+
+BAD_HELD_OUT = {
+    # It said "holds one step".
+    "no step": (demos_without_steps, "empty.npz holds no step: pass --demos of two steps or more"),
+    # An IndexError in np.quantile, after two numpy warnings.
+    "one-step episodes": (demos_of_one_step_episodes,
+                          "seed4.npz: every step starts an episode, so none has a previous action: pass demos whose episodes last two steps or more"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_HELD_OUT))
+def test_held_out_demos_without_a_previous_action_are_refused(saved, monkeypatch, tmp_path, case):
+    make, message = BAD_HELD_OUT[case]
+    assert refusal(saved, monkeypatch, "--demos", make(tmp_path, saved[0])) == f"error: {tmp_path}/{message}"
+
+
+@pytest.mark.parametrize("frame_skip", [4000, 8000])
+def test_models_of_a_rate_without_two_steps_an_episode_are_refused(saved, monkeypatch, tmp_path, frame_skip):
+    """Hopper-v4's 1000 steps at frame skip 4 last 1 step at 4000 (the held-out actions 'did not vary', or an IndexError)
+    and none at 8000 (the refusal named --frame-skip, no flag of this script)."""
+    models = {}
+    for method in ca.METHODS:
+        (tmp_path / method).mkdir()
+        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(frame_skip=frame_skip))
+    line = refusal(saved, monkeypatch, **models)
+    assert line == (f"error: the models were trained at frame skip {frame_skip}, at which an episode of Hopper-v4 ends before its second "
+                    "step: pass models of a smaller --frame-skip")
+
+
+def test_noise_for_models_that_hide_the_velocities_is_refused(saved, monkeypatch, tmp_path):
+    """The velocities were zeroed and the report recorded the ignored noise std."""
+    models = {}
+    for method in ca.METHODS:
+        (tmp_path / method).mkdir()
+        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True))
+    line = refusal(saved, monkeypatch, "--obs-noise-std", "0.5", **models)
+    assert line == ("error: --obs-noise-std 0.5: the models were trained with --hide-velocities, so the velocities are zeroed, not noisy: "
+                    "leave --obs-noise-std out")
