@@ -1194,17 +1194,20 @@ def run(args):
             f"--history {history} does not match the models, trained with history "
             f"{model_history}: drop --history or pass {model_history}"
         )
-    std = args.obs_noise_std
-    if args.obs_noise_std is None:
-        fix = "pass --obs-noise-std for the analysis"
-        std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix=fix)
-    frame_skip = agreed(rates, "frame_skip", "--frame-skip")
     hide = bool(agreed(saved, "hide_velocities", "--hide-velocities"))
     if hide and args.obs_noise_std is not None:
         raise UsageError(
             f"--obs-noise-std {args.obs_noise_std:g}: the models were trained with "
             "--hide-velocities, so the velocities are zeroed, not noisy: leave --obs-noise-std out"
         )
+    std = args.obs_noise_std
+    if args.obs_noise_std is None:
+        fix = "pass --obs-noise-std for the analysis"
+        # With the velocities hidden that flag is refused (above): only alike models will do.
+        if hide:
+            fix = "pass models trained alike"
+        std = agreed(saved, "obs_noise_std", "--obs-noise-std", fix=fix)
+    frame_skip = agreed(rates, "frame_skip", "--frame-skip")
     # do(o_hist) and the scores need steps with a previous action in their episode.
     episode_steps = env.spec.max_episode_steps
     if frame_skip:

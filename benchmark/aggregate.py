@@ -21,9 +21,9 @@ from typing import NamedTuple
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark import run_grid
 from benchmark.paper import METHOD_NAMES, NATIVE_FRAME_SKIP, PAPER_ENV_ORDER, PAPER_TABLE2, env_family, paper_settings, script_of, setting_differences, variant_settings
-from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, seed_score, write_text, written_atomically
+from benchmark.results import (EXPERT, OneLineParser, ResultError, UsageError, check_folder, check_writable, read_result, run_cli, seed_score,
+                               write_text, written_atomically)
 
 
 @dataclass
@@ -78,27 +78,6 @@ def collect(results_dir: Path, allow_nonpaper: bool):
                 problems.append(f"left out seed {record.seed} of {older.path}: {record.path} is newer and holds it too")
             records[key] = record
     return list(records.values()), problems
-
-
-def check_folder(folder: Path, what: str, fix: str):
-    """Refuse in one line a folder to read that is not there, or is a file:
-    '{what} {folder} not found: {fix}'."""
-    if folder.is_dir():
-        return
-    problem = "is a file, not a folder" if folder.exists() else "not found"
-    raise UsageError(f"{what} {folder} {problem}: {fix}")
-
-
-def check_writable(path: Path, flag: str, is_file: bool = False):
-    """Refuse in one line, before any work, an output path (a folder, or with is_file a file) that
-    cannot be written: a file in the way of its folder, a folder where the file goes, no right to
-    it."""
-    path = Path(path)
-    reason = run_grid.unwritable(path.parent if is_file else path)
-    if is_file and path.is_dir():
-        reason = f"{path} is a folder"
-    if reason:
-        raise UsageError(f"{flag} {path} cannot be written: {reason}: pass another {flag}")
 
 
 def ordered(names, order) -> list:

@@ -14,8 +14,8 @@ import time
 from pathlib import Path
 
 from benchmark.machine import describe, machine
-from benchmark.results import UsageError
-from benchmark.run_grid import last_line_of, method_files
+from benchmark.results import UsageError, last_line_of
+from benchmark.run_grid import method_files
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 BEFORE_FUSED_ADAM = "8ce2c69"
@@ -51,6 +51,9 @@ def not_shown(commit: str, script: str) -> str:
     example = ""
     if added:
         example = f", e.g. {added}, which added it"
+    # A version older than the default baseline is refused by both benchmarks: name that one.
+    if added and git("merge-base", "--is-ancestor", added, BEFORE_FUSED_ADAM).returncode == 0:
+        example = f", e.g. {BEFORE_FUSED_ADAM}"
     return f"commit {commit!r} has no {script}.py: give a later commit{example}"
 
 
@@ -63,7 +66,7 @@ def check_method_file(flag: str, script: str):
 
 def timed_run(command: list) -> float:
     """Run the command from the repository's root; the seconds it took. A failed run is refused with its
-    error line (run_grid.last_line_of: the line inside tyro's box, else the last line of stderr)."""
+    error line (results.last_line_of: the line inside tyro's box, else the last line of stderr)."""
     start = time.perf_counter()
     finished = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True)
     seconds = time.perf_counter() - start

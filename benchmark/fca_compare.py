@@ -19,9 +19,9 @@ import numpy as np
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.aggregate import check_writable, save_figure
+from benchmark.aggregate import save_figure
 from benchmark.paper import PAPER_TABLE2
-from benchmark.results import OneLineParser, ResultError, UsageError, read_result, run_cli, write_text
+from benchmark.results import OneLineParser, ResultError, UsageError, check_writable, read_result, run_cli, write_text
 
 DIVERGED_ABOVE = 4.0
 """the largest error an adversary whose predictions stay inside the action bounds [-1, 1] can have (declared)"""

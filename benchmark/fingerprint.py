@@ -28,9 +28,8 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.aggregate import check_writable
 from benchmark.machine import MKL_VARIABLES, machine
-from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_writable, run_cli, write_text
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 FIXED_MODE = {"MKL_CBWR": "COMPATIBLE"}

@@ -22,9 +22,9 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark import aggregate, regime_summary
+from benchmark import regime_summary
 from benchmark.regimes import RESULTS_DIR, existing_runs_dir
-from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_folder, run_cli, write_text
 
 REGIME, ENV = "native_hidden", "Hopper-v4"
 ANALYSIS_DIR, H3_DIR, REFERENCE_DIR = Path("analysis/Hopper-v4/native_hidden"), Path("results/h3"), Path("analysis/Hopper-v4")
@@ -179,7 +179,7 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", type=Path, default=REFERENCE_DIR, help=f"the reports at the paper's setting (default {REFERENCE_DIR})")
     args = parser.parse_args(argv)
     fix = "pass --reference, the folder of the reports at the paper's setting"
-    aggregate.check_folder(args.reference, "reference folder", fix)
+    check_folder(args.reference, "reference folder", fix)
     # Mistyped run folders would show every score as —, with only a warning per seed.
     existing_runs_dir(REGIME, args.h3_dir, "--h3-dir")
     existing_runs_dir(REGIME, args.results_dir)

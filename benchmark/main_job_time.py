@@ -26,8 +26,7 @@ from benchmark.baseline import (
     script_at,
     timed_run,
 )
-from benchmark.results import OneLineParser, UsageError, run_cli
-from benchmark.run_grid import check_distinct
+from benchmark.results import OneLineParser, UsageError, check_distinct, run_cli
 
 SEEDS = ["1", "2", "3"]
 

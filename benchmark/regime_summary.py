@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import aggregate, run_grid
 from benchmark.paper import METHOD_NAMES, setting_differences
 from benchmark.regimes import ENVS, METHODS, REGIMES, RESULTS_DIR, runs_dir
-from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, read_result, run_cli, write_text, written_atomically
+from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, check_folder, read_result, run_cli, write_text, written_atomically
 from benchmark.stats import bootstrap_ci, expert_normalised, probability_of_improvement, probability_of_improvement_ci
 
 COMPLETE = 5
@@ -172,7 +172,7 @@ def main(argv=None) -> int:
                         help=f"also put the summary and plot into this page (alone: {PAGE}), between {PAGE_START} and {PAGE_END}")
     args = parser.parse_args(argv)
     fix = "run python -m benchmark.regimes first, or pass --results-dir"
-    aggregate.check_folder(args.results_dir, "results folder", fix)
+    check_folder(args.results_dir, "results folder", fix)
     if args.page:
         aggregate.page_parts(args.page, PAGE_START, PAGE_END)  # check the markers before anything is written
     regimes = [regime for regime in REGIMES if runs_dir(regime, args.results_dir).is_dir()]

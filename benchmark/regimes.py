@@ -17,7 +17,7 @@ from pathlib import Path
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import run_grid
-from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_distinct, run_cli, write_text
 
 REGIMES = {
     "native_noise": ([], "native control rate, N(0, 0.2^2) noise on the velocities: the paper's setting (Table 2)"),
@@ -47,6 +47,8 @@ def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR, flag="--resu
     folder = runs_dir(regime, results_dir)
     if not folder.is_dir():
         run = f"python -m benchmark.regimes --regimes {regime}"
+        if Path(results_dir) != RESULTS_DIR:  # the runner writes into RESULTS_DIR unless told
+            run += f" --results-dir {results_dir}"
         raise UsageError(f"no {folder}: run {run} first, or pass {flag}")
     return folder
 
@@ -94,7 +96,7 @@ def main(argv=None) -> int:
     parser.add_argument("--save-model", action="store_true", help="save each run's model beside its result (for copycat_analysis.py)")
     parser.add_argument("--dry-run", action="store_true", help="list what would run")
     args = parser.parse_args(argv)
-    run_grid.check_distinct("--regimes", args.regimes)  # else its grid would run twice
+    check_distinct("--regimes", args.regimes)  # else its grid would run twice
     commit = scripts_commit(args.scripts_dir)
     status = 0
     for regime in args.regimes:

@@ -57,6 +57,53 @@ def run_cli(main):
         signal.signal(signal.SIGTERM, previous)  # a caller in this process (a test) keeps its own
 
 
+def check_folder(folder: Path, what: str, fix: str):
+    """Refuse in one line a folder to read that is not there, or is a file:
+    '{what} {folder} not found: {fix}'."""
+    if folder.is_dir():
+        return
+    problem = "is a file, not a folder" if folder.exists() else "not found"
+    raise UsageError(f"{what} {folder} {problem}: {fix}")
+
+
+def check_writable(path: Path, flag: str, is_file: bool = False):
+    """Refuse in one line, before any work, an output path (a folder, or with is_file a file) that
+    cannot be written: a file in the way of its folder, a folder where the file goes, no right to
+    it."""
+    path = Path(path)
+    reason = unwritable(path.parent if is_file else path)
+    if is_file and path.is_dir():
+        reason = f"{path} is a folder"
+    if reason:
+        raise UsageError(f"{flag} {path} cannot be written: {reason}: pass another {flag}")
+
+
+def unwritable(folder: Path):
+    """Why files cannot be written in folder (made with its parents as needed), or None."""
+    existing = next(path for path in (folder, *folder.parents) if path.exists())
+    if not existing.is_dir():
+        return f"{existing} is not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return None
+
+
+def check_distinct(flag: str, values: list):
+    """Refuse a value given twice: the same run (or timing) would be made twice, side by side."""
+    repeated = [value for index, value in enumerate(values) if value in values[:index]]
+    if repeated:
+        raise UsageError(f"{flag} lists {repeated[0]} twice: name each once")
+
+
+def last_line_of(text: str) -> str:
+    """The line of a failed run's output that names its problem: the first inside tyro's error box, else the last."""
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    tops = [i for i, line in enumerate(lines) if line.startswith("╭")]
+    if tops and lines[-1].startswith("╰"):  # tyro's boxed error: its first line inside the box names the problem
+        lines = [lines[tops[-1] + 1].strip("│ ")]
+    return lines[-1][:200] if lines else "(empty log)"
+
+
 def result_path(results_dir, method: str, env: str, seeds) -> Path:
     """Where a method script given --output-dir results_dir/method/env --seeds *seeds writes its result."""
     return Path(results_dir) / method / env / f"result_seeds{'-'.join(map(str, seeds))}.json"

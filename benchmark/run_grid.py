@@ -36,7 +36,8 @@ from pathlib import Path
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark.paper import VARIANTS, as_flags, paper_settings, script_of, setting_differences, variant_flags, variant_settings
-from benchmark.results import EXPERT, OneLineParser, ResultError, UsageError, make_result, read_result, result_path, run_cli, write_text
+from benchmark.results import (EXPERT, OneLineParser, ResultError, UsageError, check_distinct, last_line_of, make_result, read_result, result_path,
+                               run_cli, unwritable, write_text)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 EXPERT_SEED = 0
@@ -179,23 +180,6 @@ def check_slurm(name: str):
     reason = unwritable(path.parent)  # write_text makes the missing folders
     if reason:
         raise UsageError(f"--slurm {name} cannot be written: {reason}: pass another --slurm")
-
-
-def unwritable(folder: Path):
-    """Why files cannot be written in folder (made with its parents as needed), or None."""
-    existing = next(path for path in (folder, *folder.parents) if path.exists())
-    if not existing.is_dir():
-        return f"{existing} is not a folder"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return f"{existing} is not writable"
-    return None
-
-
-def check_distinct(flag: str, values: list):
-    """Refuse a value given twice: the same run (or timing) would be made twice, side by side."""
-    repeated = [value for index, value in enumerate(values) if value in values[:index]]
-    if repeated:
-        raise UsageError(f"{flag} lists {repeated[0]} twice: name each once")
 
 
 def combinations(options: Options) -> list:
@@ -344,14 +328,6 @@ def write_expert_result(run: Run, options: Options, output: str):
 
 def last_line(path: Path) -> str:
     return last_line_of(path.read_text(errors="replace"))
-
-
-def last_line_of(text: str) -> str:
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    tops = [i for i, line in enumerate(lines) if line.startswith("╭")]
-    if tops and lines[-1].startswith("╰"):  # tyro's boxed error: its first line inside the box names the problem
-        lines = [lines[tops[-1] + 1].strip("│ ")]
-    return lines[-1][:200] if lines else "(empty log)"
 
 
 class Processes:

@@ -21,8 +21,7 @@ from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.aggregate import check_writable
-from benchmark.results import OneLineParser, UsageError, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_writable, run_cli, write_text
 
 HOPPER_STEPS = {"dagger": 468_100}
 """training steps of a paper-protocol Hopper seed, where a run differs from 1000 epochs of 312 steps"""

@@ -32,8 +32,7 @@ from benchmark.baseline import (
     machine_line,
     script_at,
 )
-from benchmark.results import OneLineParser, UsageError, run_cli
-from benchmark.run_grid import check_distinct, last_line_of
+from benchmark.results import OneLineParser, UsageError, check_distinct, last_line_of, run_cli
 
 
 def start(script_path: Path, epochs: int, out: Path, cuda: bool, env: dict) -> subprocess.Popen:

@@ -83,12 +83,8 @@ def gather(results_dir: Path, replication_dir: Path):
     settings (regime_summary.collect checks them), each at a seed declared for its method; a seed that is in both
     folders counts from the map. The map's Walker2d runs are valid but not part of these tests, and are not listed."""
     records, problems = regime_summary.collect(REGIME, results_dir, METHODS)
-    if runs_dir(REGIME, replication_dir).is_dir():
-        replication, replication_problems = regime_summary.collect(REGIME, replication_dir, METHODS)
-        problems += replication_problems
-    else:
-        replication = []
-        problems.append(f"no replication folder {runs_dir(REGIME, replication_dir)}: the capacity test has the map's seeds only")
+    replication, replication_problems = regime_summary.collect(REGIME, replication_dir, METHODS)
+    problems += replication_problems
     kept = {"map": [], "replication": []}
     for source, found in (("map", records), ("replication", replication)):
         for record in (r for r in found if r.env == ENV):
@@ -311,8 +307,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     existing_runs_dir(REGIME, args.results_dir)
     # A mistyped folder would leave the capacity test at the map's seeds, with only a warning.
-    fix = f"pass --replication-dir, the folder whose {REGIME}/runs/ holds C2F and BC-OH seeds 6-10"
-    aggregate.check_folder(args.replication_dir, "replication folder", fix)
+    existing_runs_dir(REGIME, args.replication_dir, "--replication-dir")
     records, replication, problems = gather(args.results_dir, args.replication_dir)
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, [ENV])
     problems += expert_problems

@@ -193,7 +193,7 @@ def watch(
 
 
 def check_every(loaded: tuple, every: int, max_steps: int):
-    """Refuse an --every longer than the steps watched (--max-steps, or an episode if shorter):
+    """Refuse an --every as long as the steps watched (--max-steps, or an episode if shorter):
     it would draw the first and the last frame only (and a frame of 800 s for --every 100000)."""
     module, _, args = loaded
     env = module.make_env(args.env, args.frame_skip)
@@ -203,10 +203,11 @@ def check_every(loaded: tuple, every: int, max_steps: int):
     limit = f"--max-steps {max_steps}"
     if length < max_steps:
         limit = f"the {length} steps of an episode of {args.env} at frame skip {args.frame_skip}"
-    if every > watched:
+    # Frames are drawn at steps 0, every, 2 * every, ... and at the last step watched.
+    if every >= watched > 1:
         raise UsageError(
-            f"--every {every} is more than {limit}: no frame would be drawn between the first "
-            f"and the last; pass --every {watched} or less"
+            f"--every {every} is not less than {limit}: no frame would be drawn between the first "
+            f"and the last; pass --every {watched - 1} or less"
         )
 
 

@@ -14,7 +14,7 @@ import pytest
 from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, plant, run_in_process, run_module
 
 from benchmark import aggregate, run_grid
-from benchmark.results import ResultError, UsageError, make_result, read_result, result_path, run_cli
+from benchmark.results import ResultError, UsageError, last_line_of, make_result, read_result, result_path, run_cli
 
 DEMO_FILE = '''
 def demo_file(env, frame_skip, num_samples):
@@ -296,9 +296,9 @@ TYRO_BOX = """\
 
 
 def test_a_failed_run_is_told_by_the_first_line_of_tyros_error_box():
-    assert run_grid.last_line_of(TYRO_BOX) == "Unrecognized options: --epoch, 1"
-    assert run_grid.last_line_of("training\nerror: --seeds needs distinct seeds\n") == "error: --seeds needs distinct seeds"
-    assert run_grid.last_line_of("a log cut after a box's top\n╰──╯\n") == "╰──╯"  # no box to read: the last line
+    assert last_line_of(TYRO_BOX) == "Unrecognized options: --epoch, 1"
+    assert last_line_of("training\nerror: --seeds needs distinct seeds\n") == "error: --seeds needs distinct seeds"
+    assert last_line_of("a log cut after a box's top\n╰──╯\n") == "╰──╯"  # no box to read: the last line
 
 
 @pytest.mark.parametrize("args, expected", [
@@ -588,8 +588,8 @@ def test_the_speed_benchmarks_take_a_script_as_a_commit_had_it_and_refuse_what_t
 
 
 METHOD_NAMES = ", ".join(sorted(Path(name).stem for name in METHOD_FILES))
-NO_TABLE3 = ("commit '80062f3~1' has no c2f_table3.py: "
-             "give a later commit, e.g. 80062f3, which added it")
+NO_TABLE3 = "commit '80062f3~1' has no c2f_table3.py: give a later commit, e.g. 8ce2c69"
+"""80062f3 added c2f_table3.py; the benchmarks refuse versions before 8ce2c69 (no --workers, no ms_per_step)"""
 """how the speed benchmarks refuse a baseline that lacks the script (it was told to be no commit)"""
 
 
@@ -608,12 +608,19 @@ NO_TABLE3 = ("commit '80062f3~1' has no c2f_table3.py: "
      "bc_oh.py at d8e24fd records no ms_per_step: give a later --baseline, e.g. 8ce2c69"),
     # A script the baseline lacks (c2f_table3.py came at 80062f3) was refused after bc_oh's runs.
     (["--scripts", "bc_oh", "c2f_table3", "--baseline", "80062f3~1"], NO_TABLE3),
+    # c2f.py came before the scripts timed their steps: the commit that added it was refused in turn.
+    (["--scripts", "c2f", "--baseline", "d8e24fd"], "commit 'd8e24fd' has no c2f.py: give a later commit, e.g. 8ce2c69"),
 ])
-def test_step_time_refuses_what_it_cannot_time_in_one_line_before_any_run(args, message):
+def test_step_time_refuses_what_it_cannot_time_in_one_line_before_any_run(args, message, monkeypatch):
+    from benchmark import step_time
+
     if "--baseline" in args and not (REPO_ROOT / ".git").exists():
         pytest.skip("no git history here (an unpacked archive)")
-    result = run_in_process("benchmark/step_time.py", *args, "--epochs", 1, "--repeats", 1)
-    refused(result, message)
+    # Called here, not run as a script, so that a run started before the refusal fails the test.
+    monkeypatch.setattr(step_time, "start", lambda *args: pytest.fail(f"ran {args}"))
+    with pytest.raises(UsageError) as refusal:
+        step_time.main([*args, "--epochs", "1", "--repeats", "1"])
+    assert str(refusal.value) == message
 
 
 @pytest.mark.parametrize("args, message", [

@@ -578,3 +578,16 @@ def test_noise_for_models_that_hide_the_velocities_is_refused(saved, monkeypatch
     line = refusal(saved, monkeypatch, "--obs-noise-std", "0.5", **models)
     assert line == ("error: --obs-noise-std 0.5: the models were trained with --hide-velocities, so the velocities are zeroed, not noisy: "
                     "leave --obs-noise-std out")
+
+
+def test_models_that_hide_the_velocities_with_other_noise_stds_are_told_to_agree(saved, monkeypatch, tmp_path):
+    """The refusal of models trained with different --obs-noise-std said to pass --obs-noise-std, which models that hide
+    the velocities refuse: the advice looped."""
+    models = {}
+    for method in ca.METHODS:
+        (tmp_path / method).mkdir()
+        std = 0.1 if method == "bc_so" else 0.2
+        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True, obs_noise_std=std))
+    line = refusal(saved, monkeypatch, **models)
+    assert line.startswith("error: the models were trained with different --obs-noise-std (")
+    assert line.endswith("): pass models trained alike")

@@ -299,12 +299,12 @@ def test_watch_refuses_checkpoints_whose_env_cannot_be_compared_in_one_line(trai
 
 WATCH_REFUSED_AFTER_LOADING = {  # (edits of the checkpoint, flags) -> the one line, once a backend renders and it loaded
     # OverflowError: a GIF frame of 800 s.
-    "every 100000": ({}, ("--every", 100000), "--every 100000 is more than --max-steps 1000: no frame would be drawn "
-                                              "between the first and the last; pass --every 1000 or less"),
-    # A GIF of two frames of 16 s each, exit 0: Hopper-v4's episodes end after 1000 steps.
-    "every past the episode": ({}, ("--max-steps", 5000, "--every", 2000),
-                               "--every 2000 is more than the 1000 steps of an episode of Hopper-v4 at frame skip 4: no "
-                               "frame would be drawn between the first and the last; pass --every 1000 or less"),
+    "every 100000": ({}, ("--every", 100000), "--every 100000 is not less than --max-steps 1000: no frame would be "
+                                              "drawn between the first and the last; pass --every 999 or less"),
+    # A GIF of the first and the last frame only, exit 0: Hopper-v4's episodes end after 1000 steps.
+    "every as long as the episode": ({}, ("--max-steps", 5000, "--every", 1000),
+                               "--every 1000 is not less than the 1000 steps of an episode of Hopper-v4 at frame skip 4: no "
+                               "frame would be drawn between the first and the last; pass --every 999 or less"),
     # RuntimeError: Trying to create tensor with negative dimension -1.
     "a bad setting": ({"hidden": -1}, (), "{path}: its args hold hidden -1, which is not positive and finite: re-save it "
                                           "with --save-model"),

@@ -123,7 +123,7 @@ def test_a_mistyped_run_folder_is_one_line_and_exit_2(planted, tmp_path, flag):
     argv[argv.index(flag) + 1] = str(tmp_path / "nowhere")
     result = run_in_process("benchmark/h3.py", *argv)
     message = (f"no {tmp_path / 'nowhere' / 'native_hidden' / 'runs'}: run python -m benchmark.regimes --regimes "
-               f"native_hidden first, or pass {flag}")
+               f"native_hidden --results-dir {tmp_path / 'nowhere'} first, or pass {flag}")
     assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
     assert not (analysis / "h3.md").exists()
 

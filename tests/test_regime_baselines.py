@@ -209,7 +209,7 @@ def test_the_picture_is_written_and_a_missing_map_is_one_line(planted, tmp_path)
     assert (results / "native_hidden" / "table2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list((results / "native_hidden").glob("*.tmp*"))
     result = run_module("benchmark.regime_baselines", "--results-dir", tmp_path / "nowhere")
-    assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
+    assert_usage_error(result, f"run python -m benchmark.regimes --regimes native_hidden --results-dir {tmp_path / 'nowhere'} first")
     assert result.returncode == 2
 
 

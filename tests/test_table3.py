@@ -233,7 +233,8 @@ def test_seed_ranges():
 
 def test_no_map_folder_is_one_line_and_exit_2(tmp_path):
     result = run_module("benchmark.table3", "--results-dir", tmp_path / "nowhere")
-    assert_usage_error(result, "run python -m benchmark.regimes --regimes native_hidden first")
+    # The runner's own --results-dir, where the refusal looked: the command it names then fills that folder.
+    assert_usage_error(result, f"run python -m benchmark.regimes --regimes native_hidden --results-dir {tmp_path / 'nowhere'} first")
     assert result.returncode == 2
 
 
@@ -242,8 +243,8 @@ def test_a_mistyped_replication_folder_is_one_line_and_exit_2(planted, tmp_path)
     results, _, experts, _ = planted
     result = run_in_process("benchmark/table3.py", "--results-dir", results, "--replication-dir", tmp_path / "nowhere",
                             "--expert-runs", experts)
-    message = (f"replication folder {tmp_path / 'nowhere'} not found: pass --replication-dir, the folder whose "
-               "native_hidden/runs/ holds C2F and BC-OH seeds 6-10")
+    message = (f"no {tmp_path / 'nowhere' / 'native_hidden' / 'runs'}: run python -m benchmark.regimes --regimes native_hidden "
+               f"--results-dir {tmp_path / 'nowhere'} first, or pass --replication-dir")
     assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
     assert not (results / "native_hidden" / "table3.md").exists()
 
