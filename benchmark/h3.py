@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmark import regime_summary
 from benchmark.regimes import RESULTS_DIR, existing_runs_dir
-from benchmark.results import OneLineParser, UsageError, check_folder, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_folder, finite_number, run_cli, write_text
 
 REGIME, ENV = "native_hidden", "Hopper-v4"
 ANALYSIS_DIR, H3_DIR, REFERENCE_DIR = Path("analysis/Hopper-v4/native_hidden"), Path("results/h3"), Path("analysis/Hopper-v4")
@@ -40,8 +40,7 @@ FIGURES = ["history_change_demos", "towards_previous_demos", "history_change_rol
 
 def numbers(values, length=None) -> bool:
     """Whether values is a list of finite numbers (of `length` entries, if given)."""
-    return isinstance(values, list) and bool(values) and (length is None or len(values) == length) and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < float("inf") for v in values)
+    return isinstance(values, list) and bool(values) and (length is None or len(values) == length) and all(map(finite_number, values))
 
 
 def seed_of(report: dict, model: str):

@@ -122,7 +122,8 @@ def make_result(env: str, method: str, args: dict, evaluations: dict) -> dict:
     return {"env": env, "method": method, "args": args, "scores": scores, "mean": statistics.fmean(values), "std": statistics.pstdev(values)}
 
 
-def _finite(value) -> bool:
+def finite_number(value) -> bool:
+    """Whether value is a finite int or float (a bool is not a number here)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -159,11 +160,11 @@ def read_result(path, method: str, env: str, seeds=None) -> dict:
         raise ResultError("args is not a JSON object")
     for seed, entry in scores.items():
         evaluations = entry.get("evaluations") if isinstance(entry, dict) else None
-        if not evaluations or not all(isinstance(e, list) and len(e) == 2 and all(map(_finite, e)) for e in evaluations):
+        if not evaluations or not all(isinstance(e, list) and len(e) == 2 and all(map(finite_number, e)) for e in evaluations):
             raise ResultError(f"seed {seed} has no valid evaluations (a list of [epoch, return] pairs)")
-        if not _finite(entry.get("score")) or not math.isclose(entry["score"], seed_score(evaluations), rel_tol=1e-6, abs_tol=1e-6):
+        if not finite_number(entry.get("score")) or not math.isclose(entry["score"], seed_score(evaluations), rel_tol=1e-6, abs_tol=1e-6):
             raise ResultError(f"seed {seed}: score {entry.get('score')} is not the mean of its last three evaluations")
-    if not _finite(result["mean"]) or not _finite(result["std"]):
+    if not finite_number(result["mean"]) or not finite_number(result["std"]):
         raise ResultError("mean or std is not a number")
     return result
 

@@ -14,14 +14,13 @@ A result that does not read, or whose ms_per_step is not a positive number, is n
 and left out.
 """
 import json
-import math
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 # Run as a file (python benchmark/<name>.py) too: the repository root holds the benchmark package.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.results import OneLineParser, UsageError, check_writable, run_cli, write_text
+from benchmark.results import OneLineParser, UsageError, check_writable, finite_number, run_cli, write_text
 
 HOPPER_STEPS = {"dagger": 468_100}
 """training steps of a paper-protocol Hopper seed, where a run differs from 1000 epochs of 312 steps"""
@@ -70,7 +69,7 @@ def collect(results_dir) -> tuple:
         if not isinstance(entries[0], dict) or "ms_per_step" not in entries[0]:
             continue  # no training loop of its own (the expert's evaluation)
         ms = entries[0]["ms_per_step"]
-        if isinstance(ms, bool) or not isinstance(ms, (int, float)) or not 0 < ms < math.inf:
+        if not finite_number(ms) or ms <= 0:
             problems.append(f"left out {path}: ms_per_step {ms!r} is not a positive number")
             continue
         if not isinstance(result.get("machine"), dict):
