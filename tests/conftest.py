@@ -55,6 +55,16 @@ def run_module(module, *args, cwd=REPO_ROOT, timeout=300, env=None):
     return run_command([sys.executable, "-m", module, *map(str, args)], cwd, timeout, env)
 
 
+def edited_checkpoint(path, folder, edit) -> Path:
+    """A copy of the checkpoint at path, changed in place by edit(checkpoint), saved as folder/edited.pt."""
+    import torch
+
+    checkpoint = torch.load(path, weights_only=True)
+    edit(checkpoint)
+    torch.save(checkpoint, Path(folder) / "edited.pt")
+    return Path(folder) / "edited.pt"
+
+
 def assert_usage_error(result, expected):
     """Assert that a script rejected bad input cleanly: non-zero exit, no traceback, and stderr holding
     exactly one non-empty line that contains `expected`."""

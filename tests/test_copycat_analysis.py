@@ -17,7 +17,7 @@ import tyro
 import c2f
 import c2f_table3
 import copycat_analysis as ca
-from conftest import assert_usage_error, link_experts, make_demos, run_in_process, run_script
+from conftest import assert_usage_error, edited_checkpoint, link_experts, make_demos, run_in_process, run_script
 
 OBS, ACT, H = 4, 2, 2
 W = np.array([[1.0, -0.5, 0.3, 0.0], [0.2, 0.8, -1.0, 0.5]])  # the hand-made expert: a_t = W o_t
@@ -448,14 +448,6 @@ def refusal(saved, monkeypatch, *flags, **models):
     return result.stderr.strip()
 
 
-def edited(path, tmp_path, edit):
-    """A copy of the checkpoint at path, changed in place by edit(checkpoint), in tmp_path."""
-    checkpoint = torch.load(path, weights_only=True)
-    edit(checkpoint)
-    torch.save(checkpoint, tmp_path / "edited.pt")
-    return tmp_path / "edited.pt"
-
-
 def test_noise_that_makes_the_actions_non_finite_is_refused(saved, monkeypatch):
     """--obs-noise-std 1e300 overflows float32: every measure was nan, printed with exit 0."""
     line = refusal(saved, monkeypatch, "--obs-noise-std", "1e300")
@@ -494,13 +486,13 @@ BAD_CHECKPOINTS = {
 @pytest.mark.parametrize("case", list(BAD_CHECKPOINTS))
 def test_corrupt_checkpoints_are_refused_in_one_line(saved, monkeypatch, tmp_path, case):
     edit, message = BAD_CHECKPOINTS[case]
-    path = edited(saved[1]["bc_oh"], tmp_path, edit)
+    path = edited_checkpoint(saved[1]["bc_oh"], tmp_path, edit)
     assert refusal(saved, monkeypatch, bc_oh=path) == f"error: --bc-oh {path}{message}"
 
 
 def test_a_control_whose_coarse_action_is_not_a_bool_is_refused(saved, monkeypatch, tmp_path):
     """A str "False" counted as True: the control was told it was trained without --no-coarse-action."""
-    path = edited(saved[1][ca.CONTROL], tmp_path, lambda c: c["args"].update(coarse_action="False"))
+    path = edited_checkpoint(saved[1][ca.CONTROL], tmp_path, lambda c: c["args"].update(coarse_action="False"))
     line = refusal(saved, monkeypatch, "--control", path)
     assert line == f"error: --control {path}: its args hold coarse_action 'False', which is not a bool: re-save it with c2f_table3.py"
 
@@ -563,7 +555,7 @@ def test_models_of_a_rate_without_two_steps_an_episode_are_refused(saved, monkey
     models = {}
     for method in ca.METHODS:
         (tmp_path / method).mkdir()
-        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(frame_skip=frame_skip))
+        models[method] = edited_checkpoint(saved[1][method], tmp_path / method, lambda c: c["args"].update(frame_skip=frame_skip))
     line = refusal(saved, monkeypatch, **models)
     assert line == (f"error: the models were trained at frame skip {frame_skip}, at which an episode of Hopper-v4 ends before its second "
                     "step: pass models of a smaller --frame-skip")
@@ -574,7 +566,7 @@ def test_noise_for_models_that_hide_the_velocities_is_refused(saved, monkeypatch
     models = {}
     for method in ca.METHODS:
         (tmp_path / method).mkdir()
-        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True))
+        models[method] = edited_checkpoint(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True))
     line = refusal(saved, monkeypatch, "--obs-noise-std", "0.5", **models)
     assert line == ("error: --obs-noise-std 0.5: the models were trained with --hide-velocities, so the velocities are zeroed, not noisy: "
                     "leave --obs-noise-std out")
@@ -587,7 +579,7 @@ def test_models_that_hide_the_velocities_with_other_noise_stds_are_told_to_agree
     for method in ca.METHODS:
         (tmp_path / method).mkdir()
         std = 0.1 if method == "bc_so" else 0.2
-        models[method] = edited(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True, obs_noise_std=std))
+        models[method] = edited_checkpoint(saved[1][method], tmp_path / method, lambda c: c["args"].update(hide_velocities=True, obs_noise_std=std))
     line = refusal(saved, monkeypatch, **models)
     assert line.startswith("error: the models were trained with different --obs-noise-std (")
     assert line.endswith("): pass models trained alike")

@@ -12,7 +12,7 @@ import torch
 from PIL import Image
 
 import watch
-from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, link_experts, run_in_process, run_script
+from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, edited_checkpoint, link_experts, run_in_process, run_script
 
 BUDGET = ("--env", "Hopper-v4", "--seeds", 1, "--epochs", 2, "--eval-every", 1, "--eval-episodes", 2, "--num-demo-samples", 1000, "--save-model")
 EXTRA = {"dagger": ("--dagger-samples", 100, "--dagger-rounds", 2, "--dagger-epochs", 2)}
@@ -110,14 +110,16 @@ def damaged(path, tmp_path):
 
 
 def edited(path, tmp_path, **changes):
-    checkpoint = torch.load(path, weights_only=True)
-    for key, value in changes.items():
-        if key in checkpoint:
-            checkpoint[key] = value
-        else:
-            checkpoint["args"][key] = value
-    torch.save(checkpoint, tmp_path / "edited.pt")
-    return tmp_path / "edited.pt"
+    """A copy of the checkpoint with changes to its keys, or else to its args."""
+
+    def change(checkpoint):
+        for key, value in changes.items():
+            if key in checkpoint:
+                checkpoint[key] = value
+            else:
+                checkpoint["args"][key] = value
+
+    return edited_checkpoint(path, tmp_path, change)
 
 
 REFUSED = {
