@@ -12,7 +12,6 @@ the same kind, from the seed + TWIN_SEED_OFFSET. Both see the same minibatches, 
 Each result gains where it was made (`machine`, benchmark/machine.py), as the grid runner adds it.
 """
 import json
-import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -27,7 +26,7 @@ import tyro
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import average_ensemble
 from benchmark.machine import machine
-from benchmark.results import write_text
+from benchmark.results import UsageError, run_cli, write_text
 
 TWIN_SEED_OFFSET = 1000
 """the twin's initialisation seed is the run's seed plus this (no run here uses a seed this large)"""
@@ -73,12 +72,10 @@ def main(argv=None) -> int:
     use_twins()
     if args.output_dir is None:  # named here as run() names it, to find the results afterwards
         args.output_dir = f"runs/{args.env}__{args.exp_name}__{int(time.time())}"
-    signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill PID` stops the job as Ctrl-C does
     try:
         average_ensemble.run(args)
-    except average_ensemble.UsageError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    except average_ensemble.UsageError as error:  # the method file's own: one line, exit 2 (run_cli)
+        raise UsageError(str(error))
     for seed in args.seeds:  # where each seed was made
         path = Path(args.output_dir, f"result_seeds{seed}.json")
         result = json.loads(path.read_text())
@@ -87,4 +84,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_cli(main)  # also Ctrl-C or `kill` (SIGTERM) in one line, exit 130, before training too

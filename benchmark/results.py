@@ -39,7 +39,10 @@ def run_cli(main):
     and exit status 130 (what main holds in `with` blocks, temporary folders and child processes, is cleaned up)."""
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # `kill PID` stops it as Ctrl-C does
     try:
-        sys.exit(main())
+        status = main()
+        # Here, not at exit: a reader that has gone (`| head`) is caught below.
+        sys.stdout.flush()
+        sys.exit(status)
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)

@@ -16,12 +16,16 @@ the original of another copy.
     python scripts/check_copies.py          # report drifted copies, exit 1 if any
     python scripts/check_copies.py --fix    # rewrite drifted copies from their originals
 """
-import argparse
 import ast
+import os
 import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+# The repository root holds the benchmark package.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmark.results import OneLineParser, UsageError, check_folder, run_cli
 
 MARKER_PREFIX = "# Copied from"
 MARKER = re.compile(r"# Copied from (\w+)\.(\w+)(?:\.\.(\w+))?(?: with (.+?))?\s*$")
@@ -121,7 +125,12 @@ def check(root, fix=False):
     root = Path(root)
     sources, problems, copies, rewritten = {}, [], [], 0
     for path in sorted(root.glob("*.py")):
-        sources[path.name] = path.read_text()
+        try:
+            sources[path.name] = path.read_text()
+        except (OSError, UnicodeDecodeError) as error:
+            reason = getattr(error, "strerror", None) or "not UTF-8 text"
+            problems.append(f"{path.name}: cannot read ({reason})")
+            continue
         try:
             copies += find_copies(path.name, sources[path.name], problems)
         except SyntaxError as error:
@@ -144,6 +153,9 @@ def check(root, fix=False):
         if block_text(lines, copy.block) == expected:
             continue
         orig_where = f"{orig_file}:{orig_block.start}"
+        if fix and not os.access(root / copy.file, os.W_OK):
+            fixing = "make it writable, or fix the copy by hand"
+            raise UsageError(f"--fix cannot write {root / copy.file}: {fixing}")
         if fix:
             lines[copy.block.start - 1 : copy.block.end] = [expected]
             sources[copy.file] = "".join(lines)
@@ -156,13 +168,18 @@ def check(root, fix=False):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    description = __doc__.split("\n\n")[0]
+    parser = OneLineParser(prog="python scripts/check_copies.py", description=description)
     parser.add_argument("--root", default=str(Path(__file__).resolve().parent.parent), help="directory whose *.py files are checked (default: the repo root)")
     parser.add_argument("--fix", action="store_true", help="rewrite drifted copies from their originals")
     args = parser.parse_args(argv)
-    if not Path(args.root).is_dir():
-        print(f"error: --root {args.root} is not a directory", file=sys.stderr)
-        return 2
+    root = Path(args.root)
+    fix = "pass the folder holding the method files (default: the repo root)"
+    if not args.root:
+        raise UsageError(f"--root is empty: {fix}")
+    check_folder(root, "--root", fix)
+    if not any(root.glob("*.py")):  # nothing to check would read "0 copies checked, all match"
+        raise UsageError(f"--root {root} holds no .py files: {fix}")
     if args.fix:  # a rewritten copy may be the original of another copy: repeat while anything changes
         for _ in range(MAX_FIX_PASSES):
             if not check(args.root, fix=True)[2]:
@@ -177,4 +194,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_cli(main)

@@ -21,7 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # tooling may import the repository's benchmark package
 from benchmark.aggregate import page_parts  # noqa: E402
-from benchmark.results import OneLineParser, UsageError, run_cli, write_text  # noqa: E402
+from benchmark.results import OneLineParser, UsageError, check_writable, run_cli, write_text  # noqa: E402
 
 PAGE = Path("docs/contributing.md")
 """the page whose <!-- sizes --> block --page writes when it names no page"""
@@ -162,6 +162,9 @@ def main(argv=None):
         help="print instead where this file's formatted lines go, by part",
     )
     args = parser.parse_args(argv)
+    if args.budget and args.page:
+        message = "--budget prints one file's parts, not the table that --page writes"
+        raise UsageError(f"{message}: leave out --budget or --page")
     if args.budget:
         parts = budget(args.budget)
         shares = "; ".join(f"{part} {n}" for part, n in parts.items())
@@ -169,6 +172,7 @@ def main(argv=None):
         return 0
     if args.page:
         page_parts(args.page, *MARKERS)  # check the markers before anything else
+        check_writable(args.page, "--page", is_file=True)
     text = table()
     print(text, end="")
     if args.page:

@@ -34,7 +34,7 @@ import numpy as np
 # The tooling may import the repository's benchmark package (and bc_oh.py): put the repository
 # root on sys.path.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmark.results import OneLineParser, UsageError, run_cli, written_atomically
+from benchmark.results import OneLineParser, UsageError, run_cli, unwritable, written_atomically
 
 # The paper's v4 envs are used on purpose: hide gymnasium's warning that they are out of date.
 warnings.filterwarnings("ignore", ".*is out of date", DeprecationWarning)
@@ -69,11 +69,33 @@ def check_env(env_id: str, obs_dim: int, act_dim: int, what: str) -> gym.Env:
     return env
 
 
+def store_path(dataset_id=None) -> Path:
+    """Where the local Minari store keeps dataset_id (the store itself without one), the store's
+    folder made: a store that cannot be made is refused in one line."""
+    from minari.storage.datasets_root_dir import get_dataset_path
+
+    try:
+        return get_dataset_path(dataset_id)
+    except OSError as error:
+        raise UsageError(
+            f"cannot make the local Minari store {error.filename} ({error.strerror}): "
+            "set MINARI_DATASETS_PATH to a folder you can write"
+        )
+
+
+def refuse_non_finite(demos: dict, what: str, fix: str):
+    """Refuse a NaN or an infinity in the arrays of numbers."""
+    for key in ("observations", "actions", "rewards", "final_observations"):
+        bad = np.argwhere(~np.isfinite(demos[key]))
+        if len(bad):
+            raise UsageError(f"{what}: {key} has a non-finite value at row {bad[0][0]}: {fix}")
+
+
 def open_dataset(source: str):
     """A MinariDataset from a folder (the dataset's or its data/ folder) or an id of the local
     store."""
     import minari
-    from minari.storage.datasets_root_dir import get_dataset_path
+    from minari.dataset.minari_dataset import parse_dataset_id
 
     if os.path.exists(source):
         folder = source
@@ -86,10 +108,17 @@ def open_dataset(source: str):
                 "e.g. ~/.minari/datasets/mujoco/hopper/expert-v0, or a dataset id"
             )
     else:
-        folder = os.path.join(get_dataset_path(source), "data")
+        try:
+            parse_dataset_id(source)
+        except Exception:
+            raise UsageError(
+                f"{source!r} is neither a folder nor a Minari dataset id: pass a dataset folder, "
+                "or an id (namespace/)name-vN, e.g. mujoco/hopper/expert-v0"
+            )
+        folder = os.path.join(store_path(source), "data")
         if not os.path.isdir(folder):
             raise UsageError(
-                f"no Minari dataset {source!r} in the local store {get_dataset_path()}: "
+                f"no Minari dataset {source!r} in the local store {store_path()}: "
                 f"download it with `minari download {source}` (needs network), "
                 "or pass the path of a dataset folder"
             )
@@ -106,6 +135,19 @@ def import_dataset(source: str, out: str, num_samples=None):
     # np.savez would add .npz to a name without it, and the method files look for that name.
     if not out.endswith(".npz"):
         raise UsageError(f"the demo file {out} must end in .npz, as the method files name theirs")
+    if Path(out).name == ".npz":
+        raise UsageError(f"the demo file {out} has no name before .npz: e.g. demos/hopper.npz")
+    # Refused now, not after reading the whole dataset.
+    reason = unwritable(Path(out).parent)
+    if os.path.isdir(out):
+        reason = f"{out} is a folder"
+    if reason:
+        raise UsageError(f"cannot write the demo file {out}: {reason}: pass another path")
+    if num_samples is not None and num_samples < 2:
+        raise UsageError(
+            f"--num-samples {num_samples} is too few: the method files train on more steps "
+            "than one batch, pass 2 or more, or leave it out"
+        )
     dataset = open_dataset(source)
     spaces = (dataset.observation_space, dataset.action_space)
     if not all(isinstance(space, gym.spaces.Box) and len(space.shape) == 1 for space in spaces):
@@ -122,6 +164,11 @@ def import_dataset(source: str, out: str, num_samples=None):
     env_id = dataset.env_spec.id
     env = check_env(env_id, spaces[0].shape[0], spaces[1].shape[0], f"dataset {source}")
     total = dataset.total_steps
+    if total < 2:
+        raise UsageError(
+            f"dataset {source} holds {total} steps: the method files train on more steps "
+            "than one batch, use a dataset of 2 steps or more"
+        )
     if num_samples is not None and not 0 < num_samples <= total:
         raise UsageError(
             f"--num-samples {num_samples} is not within the dataset's {total} steps: "
@@ -151,13 +198,8 @@ def import_dataset(source: str, out: str, num_samples=None):
     demos = {}
     for key, dtype in DTYPES.items():
         demos[key] = np.concatenate([part[key] for part in parts]).astype(dtype)
-    for key in ("observations", "actions", "rewards", "final_observations"):
-        bad = np.argwhere(~np.isfinite(demos[key]))
-        if len(bad):
-            raise UsageError(
-                f"dataset {source}: {key} has a non-finite value at row {bad[0][0]}: "
-                "the method files refuse it, use a clean dataset"
-            )
+    fix = "the method files refuse it, use a clean dataset"
+    refuse_non_finite(demos, f"dataset {source}", fix)
     spec_kwargs = dataset.env_spec.kwargs or {}
     native_frame_skip = getattr(env.unwrapped, "frame_skip", None)
     meta = {
@@ -170,7 +212,7 @@ def import_dataset(source: str, out: str, num_samples=None):
     # The file is written, then renamed: an interrupted run leaves no half file.
     with written_atomically(out) as tmp:
         np.savez(tmp, meta=np.array(json.dumps(meta)), **demos)
-        check_with_the_method_loader(tmp, env_id, meta["frame_skip"])
+        check_with_the_method_loader(tmp, env_id, meta["frame_skip"], out)
     print(
         f"{out}: {len(demos['actions'])} steps, {len(demos['final_observations'])} episodes "
         f"of {env_id} from Minari dataset {dataset.id}"
@@ -180,7 +222,6 @@ def import_dataset(source: str, out: str, num_samples=None):
 def export_demos(path: str, dataset_id: str, env_id=None):
     import minari
     from minari.dataset.minari_dataset import parse_dataset_id
-    from minari.storage.datasets_root_dir import get_dataset_path
 
     try:
         parse_dataset_id(dataset_id)
@@ -189,11 +230,20 @@ def export_demos(path: str, dataset_id: str, env_id=None):
             f"{dataset_id!r} is not a Minari dataset id: "
             "use (namespace/)name-vN, e.g. copycat/hopper/expert-v0"
         )
-    if os.path.exists(get_dataset_path(dataset_id)):
+    where = store_path(dataset_id)
+    if os.path.exists(where):
         raise UsageError(
-            f"Minari dataset {dataset_id} already exists at {get_dataset_path(dataset_id)}: "
+            f"Minari dataset {dataset_id} already exists at {where}: "
             f"pick another id or version, or delete it with `minari delete {dataset_id}`"
         )
+    reason = unwritable(where)
+    if reason:
+        raise UsageError(
+            f"cannot write Minari dataset {dataset_id} into the local store: {reason}: "
+            "set MINARI_DATASETS_PATH to a folder you can write"
+        )
+    if os.path.isdir(path):
+        raise UsageError(f"demo file {path} is a folder: pass the .npz file itself")
     if not os.path.isfile(path):
         raise UsageError(
             f"demo file {path} not found: "
@@ -223,6 +273,11 @@ def export_demos(path: str, dataset_id: str, env_id=None):
     env_id = env_id or meta.get("env_id")
     if env_id is None:
         raise UsageError(f"{path} names no env in its meta: pass --env, e.g. --env Hopper-v4")
+    if not isinstance(env_id, str):
+        raise UsageError(
+            f"{path}: the env_id in its meta is {env_id!r}, not an env id: "
+            "pass --env, e.g. --env Hopper-v4"
+        )
     demos = {key: np.asarray(demos[key]).astype(dtype) for key, dtype in DTYPES.items()}
     observations = demos["observations"]
     actions = demos["actions"]
@@ -237,7 +292,7 @@ def export_demos(path: str, dataset_id: str, env_id=None):
     native = getattr(env.unwrapped, "frame_skip", None)
     if meta.get("frame_skip", native) != native:
         raise UsageError(
-            f"{path} was recorded at frame skip {meta['frame_skip']}, "
+            f"{path} was recorded at frame skip {meta['frame_skip']!r}, "
             f"but a Minari env spec records {env_id}'s own rate {native}: "
             "export demos made without --frame-skip"
         )
@@ -247,6 +302,7 @@ def export_demos(path: str, dataset_id: str, env_id=None):
             f"{path}: observations, actions, episode_starts, rewards, terminations and truncations "
             f"differ in length: {FORMAT_FIX}"
         )
+    refuse_non_finite(demos, path, "make the demo file again")
     demos["episode_starts"][0] = True
     bounds = [*np.flatnonzero(demos["episode_starts"]), n]
     if final_observations.shape != (len(bounds) - 1, observations.shape[1]):
@@ -282,18 +338,15 @@ def export_demos(path: str, dataset_id: str, env_id=None):
             )
     except BaseException:
         # An interrupted export leaves no half dataset that would block the id.
-        shutil.rmtree(get_dataset_path(dataset_id), ignore_errors=True)
+        shutil.rmtree(where, ignore_errors=True)
         raise
-    print(
-        f"Minari dataset {dataset_id} at {get_dataset_path(dataset_id)}: "
-        f"{n} steps, {len(buffers)} episodes of {env_id}"
-    )
+    print(f"Minari dataset {dataset_id} at {where}: {n} steps, {len(buffers)} episodes of {env_id}")
 
 
-def check_with_the_method_loader(path, env_id: str, frame_skip):
+def check_with_the_method_loader(path, env_id: str, frame_skip, out: str):
     """The import goes through the loader of every method file (bc_oh.load_demos, here the
     tooling may import the repository's code): what a method file would refuse is refused here,
-    in one line."""
+    in one line, naming the demo file out rather than its temporary path."""
     import bc_oh
 
     args = SimpleNamespace(
@@ -304,7 +357,8 @@ def check_with_the_method_loader(path, env_id: str, frame_skip):
         with contextlib.redirect_stdout(io.StringIO()):
             bc_oh.load_demos(args, bc_oh.make_env(env_id))
     except bc_oh.UsageError as error:
-        raise UsageError(f"the method files would refuse this import ({error})")
+        message = str(error).replace(str(path), out)
+        raise UsageError(f"the method files would refuse this import ({message})")
 
 
 def main(argv=None):

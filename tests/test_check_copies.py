@@ -1,11 +1,15 @@
 """Tests of scripts/check_copies.py, the "# Copied from" checker, on tiny files in a temp dir."""
+import os
 import re
+import subprocess
+import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
 from check_copies import apply_renames, check, find_copies, parse_renames, top_level_blocks
-from conftest import METHOD_FILES, REPO_ROOT, run_script
+from conftest import METHOD_FILES, REPO_ROOT, run_in_process, run_script
 
 ORIGINAL = '''\
 import functools
@@ -232,3 +236,63 @@ def test_a_span_must_end_below_its_marker_and_hold_no_marker(tmp_path):
     problems = check(tmp_path)[0]
     assert "late.py:4: span end nothing is not a definition below the marker" in problems
     assert "nested.py:10: marker inside the span of line 4" in problems
+
+
+ROOT_FIX = "pass the folder holding the method files (default: the repo root)"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--bogus"], "unrecognized arguments: --bogus: see python scripts/check_copies.py --help"),
+    (["--root", "afile"], f"--root {{tmp}}/afile is a file, not a folder: {ROOT_FIX}"),
+    (["--root", "missing"], f"--root {{tmp}}/missing not found: {ROOT_FIX}"),
+    (["--root", ""], f"--root is empty: {ROOT_FIX}"),
+    # a folder with nothing to check read "0 copies checked, all match", exit 0
+    (["--root", "empty"], f"--root {{tmp}}/empty holds no .py files: {ROOT_FIX}"),
+], ids=["unknown flag", "a file", "missing", "empty", "no .py files"])
+def test_a_bad_command_line_is_one_line(tmp_path, args, message):
+    """argparse's errors were two lines (usage, then the error); --root named no fix."""
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "empty").mkdir()
+    args = [str(tmp_path / arg) if arg in ("afile", "missing", "empty") else arg for arg in args]
+    result = run_in_process("scripts/check_copies.py", *args)
+    expected = "error: " + message.format(tmp=tmp_path) + "\n"
+    assert (result.returncode, result.stdout, result.stderr) == (2, "", expected)
+
+
+def test_a_file_that_is_not_utf8_is_a_problem_not_a_traceback(root):
+    (root / "binary.py").write_bytes(b"\xff\xfe x = 1\n")
+    result = run_in_process("scripts/check_copies.py", "--root", root)
+    assert (result.returncode, result.stderr) == (1, "binary.py: cannot read (not UTF-8 text)\n")
+
+
+def test_fix_refuses_a_file_it_cannot_write(root, monkeypatch):
+    """A read-only copy (chmod does not stop root: os.access, which --fix asks, plays it) was
+    rewritten anyway, or raised a traceback for a user who could not write it."""
+    copy = root / "copy.py"
+    drifted = copy.read_text().replace("size = 3", "size = 4")
+    copy.write_text(drifted)
+    real_access = os.access
+
+    def access(path, mode, **kwargs):
+        return real_access(path, mode, **kwargs) and Path(path) != copy
+
+    monkeypatch.setattr(os, "access", access)
+    result = run_in_process("scripts/check_copies.py", "--root", root, "--fix")
+    expected = f"error: --fix cannot write {copy}: make it writable, or fix the copy by hand\n"
+    assert (result.returncode, result.stderr) == (2, expected)
+    assert copy.read_text() == drifted
+
+
+def test_output_into_a_closed_pipe_ends_quietly(root):
+    """`check_copies.py | head` where the reader has gone: a BrokenPipeError traceback (stdout
+    unbuffered, as PYTHONUNBUFFERED=1 sets it, so the line is written inside main)."""
+    read, write = os.pipe()
+    os.close(read)
+    command = [sys.executable, str(REPO_ROOT / "scripts/check_copies.py"), "--root", str(root)]
+    environment = dict(os.environ, PYTHONUNBUFFERED="1")
+    try:
+        done = subprocess.run(command, stdout=write, stderr=subprocess.PIPE,
+                              text=True, env=environment, timeout=60)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (1, "")

@@ -1,10 +1,12 @@
 """benchmark/ensemble_twins.py, the Average-Ensemble's control: two members of one kind from different seeds."""
 import json
+import os
+import signal
 
 import numpy as np
 import pytest
 import torch
-from conftest import fake_demos, run_module
+from conftest import fake_demos, run_in_process, run_module
 
 import average_ensemble
 from benchmark import ensemble_twins
@@ -38,3 +40,26 @@ def test_two_workers_train_the_twins_and_each_result_records_its_machine(tmp_pat
         assert result["method"] == "ensemble_twins" and result["args"]["member"] == "bc_oh"
         assert list(result["scores"][str(seed)]["members"]) == ["bc_oh", "bc_oh_twin"]  # trained in a spawned worker
         assert result["machine"] == machine(), "the worker's machine record: the same CPU, versions and (inherited) environment"
+
+
+@pytest.mark.parametrize("stop", ["ctrl-c", "kill"])
+def test_an_interrupt_while_loading_the_demos_is_one_line(tmp_path, monkeypatch, stop):
+    """Ctrl-C (or `kill`, SIGTERM) before training starts printed a KeyboardInterrupt traceback:
+    the control called average_ensemble.run itself, outside run_cli."""
+
+    def interrupted_loading(args, env):
+        if stop == "kill":
+            os.kill(os.getpid(), signal.SIGTERM)  # turned into Ctrl-C while the command runs
+        raise KeyboardInterrupt
+
+    # Run as __main__, the control swaps average_ensemble's policy: put it back afterwards.
+    monkeypatch.setattr(average_ensemble, "make_policy", average_ensemble.make_policy)
+    monkeypatch.setattr(average_ensemble, "METHOD", average_ensemble.METHOD)
+    monkeypatch.setattr(average_ensemble, "load_demos", interrupted_loading)
+    out = tmp_path / "out"
+    try:
+        result = run_in_process("benchmark/ensemble_twins.py", "--seeds", 1, "--output-dir", out)
+    except KeyboardInterrupt:
+        pytest.fail("the interrupt came out of the command as a traceback")
+    assert (result.returncode, result.stderr) == (130, "interrupted\n")
+    assert not out.exists()

@@ -1,7 +1,9 @@
 """scripts/file_sizes.py: the table of file lengths and diffs against bc_oh.py, and the
 contributors' page it goes into."""
 
+import os
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import file_sizes
@@ -183,3 +185,36 @@ def test_without_ruff_it_says_so_in_one_line(monkeypatch, capsys):
         result, f"ruff is not installed for {sys.executable}: pip install -r requirements.txt"
     )
     assert result.returncode == 2 and result.stdout == ""
+
+
+def test_budget_and_page_together_are_refused(tmp_path, capsys):
+    """--budget printed its line and left the page alone, though --page asked to write it."""
+    page = tmp_path / "page.md"
+    page.write_text("<!-- sizes -->\n<!-- /sizes -->\n")
+    result = run_in_process(capsys, ["--budget", "bc_oh", "--page", str(page)])
+    message = "--budget prints one file's parts, not the table that --page writes"
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == f"error: {message}: leave out --budget or --page\n"
+
+
+def test_a_page_that_cannot_be_written_is_refused_before_the_table(tmp_path, monkeypatch, capsys):
+    """A read-only folder (chmod does not stop root: os.access, which the check asks, plays it)
+    was found only when writing, after the table was measured and printed."""
+    folder = tmp_path / "read_only"
+    folder.mkdir()
+    page = folder / "page.md"
+    page.write_text("<!-- sizes -->\n<!-- /sizes -->\n")
+    real_access = os.access
+
+    def access(path, mode, **kwargs):
+        return real_access(path, mode, **kwargs) and Path(path) != folder
+
+    def no_table():
+        raise AssertionError("the table was measured before the page was checked")
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(file_sizes, "table", no_table)
+    result = run_in_process(capsys, ["--page", str(page)])
+    reason = f"{folder} is not writable"
+    expected = f"error: --page {page} cannot be written: {reason}: pass another --page\n"
+    assert (result.returncode, result.stdout, result.stderr) == (2, "", expected)

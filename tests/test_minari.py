@@ -1,6 +1,8 @@
 """scripts/minari_demos.py: Minari datasets <-> demo .npz files, exactly, and its refusals (skipped without minari)."""
 import json
+import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -210,10 +212,116 @@ def test_the_import_goes_through_the_method_files_loader(tmp_path, monkeypatch, 
 
     def refusing_loader(args, env):
         seen.append((args.demos, args.env, args.frame_skip))
-        raise bc_oh.UsageError("planted refusal")
+        raise bc_oh.UsageError(f"{args.demos}: planted refusal")
 
     monkeypatch.setattr(bc_oh, "load_demos", refusing_loader)
     with pytest.raises(SystemExit) as stop:
         minari_demos.run_cli(lambda: minari_demos.main(["import", "test/hopper/random-v0", str(tmp_path / "x.npz")]))
-    assert stop.value.code == 2 and "the method files would refuse this import (planted refusal)" in capsys.readouterr().err
+    # The refusal names the demo file asked for: it named the temporary file, which is gone.
+    refusal = f"the method files would refuse this import ({tmp_path / 'x.npz'}: planted refusal)"
+    assert stop.value.code == 2 and refusal in capsys.readouterr().err
     assert seen and seen[0][1:] == ("Hopper-v4", 4) and not list(tmp_path.glob("x.npz*")), "no output, no temporary file"
+
+
+def refused_in_process(*args, message):
+    """minari_demos.py run in this process: exactly `error: message` on stderr, exit status 2."""
+    from conftest import run_in_process
+
+    result = run_in_process("scripts/minari_demos.py", *args)
+    assert (result.returncode, result.stderr) == (2, f"error: {message}\n"), result.stderr
+    return result
+
+
+def deny_writing(monkeypatch, folder):
+    """Play a read-only folder (chmod does not stop root): os.access, which the checks ask,
+    says no."""
+    real_access = os.access
+
+    def access(path, mode, **kwargs):
+        return real_access(path, mode, **kwargs) and Path(path) != folder
+
+    monkeypatch.setattr(os, "access", access)
+
+
+def test_import_refuses_an_output_it_cannot_write_before_opening_the_dataset(tmp_path, monkeypatch):
+    """A folder in place of the file, a file in place of its folder, a read-only folder: refused
+    first (the dataset does not exist here); they failed at the end, after reading the dataset."""
+    (tmp_path / "dir.npz").mkdir()
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "ro").mkdir()
+    deny_writing(monkeypatch, tmp_path / "ro")
+    for out, reason in [(tmp_path / "dir.npz", f"{tmp_path / 'dir.npz'} is a folder"),
+                        (tmp_path / "afile/x.npz", f"{tmp_path / 'afile'} is not a folder"),
+                        (tmp_path / "ro/x.npz", f"{tmp_path / 'ro'} is not writable")]:
+        message = f"cannot write the demo file {out}: {reason}: pass another path"
+        refused_in_process("import", "test/missing-v0", out, message=message)
+    # A name of only ".npz" left its temporary file behind, under a message about the loader.
+    message = f"the demo file {tmp_path / '.npz'} has no name before .npz: e.g. demos/hopper.npz"
+    refused_in_process("import", "test/missing-v0", tmp_path / ".npz", message=message)
+
+
+def test_import_refuses_one_step_which_no_method_file_trains_on(tmp_path):
+    """--num-samples 0 or 1 is refused before opening the dataset; a dataset of one step is refused
+    as such. A demo file of one step is less than a batch: the loader refused it, naming the
+    temporary file and --batch-size, which this script does not take."""
+    for n in (0, 1, -5):
+        message = (f"--num-samples {n} is too few: the method files train on more steps than one "
+                   "batch, pass 2 or more, or leave it out")
+        refused_in_process("import", "test/missing-v0", tmp_path / "x.npz", "--num-samples", n,
+                           message=message)
+    episodes = random_episodes(gym.spaces.Box(-1, 1, (11,)), 3, steps=1, episodes=1)
+    make_dataset("test/one-v0", episodes)
+    message = ("dataset test/one-v0 holds 1 steps: the method files train on more steps than one "
+               "batch, use a dataset of 2 steps or more")
+    refused_in_process("import", "test/one-v0", tmp_path / "x.npz", message=message)
+    assert not list(tmp_path.glob("x.npz*"))
+
+
+def test_import_tells_a_path_or_a_bad_id_from_a_dataset_to_download(tmp_path, monkeypatch):
+    """A source that is neither a folder nor a dataset id was to be downloaded (`minari download
+    bad id`); a MINARI_DATASETS_PATH that cannot be a folder was "cannot use ...: pass another
+    path"."""
+    for source in ("bad id", str(tmp_path / "no/such/folder")):
+        message = (f"{source!r} is neither a folder nor a Minari dataset id: "
+                   "pass a dataset folder, or an id (namespace/)name-vN, e.g. mujoco/hopper/expert-v0")
+        refused_in_process("import", source, tmp_path / "x.npz", message=message)
+    (tmp_path / "afile").write_text("")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "afile"))
+    message = (f"cannot make the local Minari store {tmp_path / 'afile'} (File exists): "
+               "set MINARI_DATASETS_PATH to a folder you can write")
+    refused_in_process("import", "test/hopper-v0", tmp_path / "x.npz", message=message)
+    refused_in_process("export", tmp_path / "d.npz", "test/hopper-v0", message=message)
+
+
+def test_export_refuses_a_store_it_cannot_write_and_demo_files_it_would_export_wrong(
+        tmp_path, minari_store):
+    demos = as_demos(random_episodes(gym.spaces.Box(-1, 1, (11,)), 3))
+    meta = {"env_id": "Hopper-v4"}
+    np.savez(tmp_path / "ok.npz", meta=np.array(json.dumps(meta)), **demos)
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        minari_store.mkdir()
+        deny_writing(monkeypatch, minari_store)
+        message = (f"cannot write Minari dataset test/ro-v0 into the local store: {minari_store} "
+                   "is not writable: set MINARI_DATASETS_PATH to a folder you can write")
+        refused_in_process("export", tmp_path / "ok.npz", "test/ro-v0", message=message)
+    (tmp_path / "dir.npz").mkdir()
+    message = f"demo file {tmp_path / 'dir.npz'} is a folder: pass the .npz file itself"
+    refused_in_process("export", tmp_path / "dir.npz", "test/dir-v0", message=message)
+    # An env_id that is no string raised a TypeError.
+    np.savez(tmp_path / "int.npz", meta=np.array(json.dumps({"env_id": 5})), **demos)
+    message = (f"{tmp_path / 'int.npz'}: the env_id in its meta is 5, not an env id: "
+               "pass --env, e.g. --env Hopper-v4")
+    refused_in_process("export", tmp_path / "int.npz", "test/int-v0", message=message)
+    # A frame skip written as text read "recorded at frame skip 4, but ... own rate 4".
+    text = {"env_id": "Hopper-v4", "frame_skip": "4"}
+    np.savez(tmp_path / "text.npz", meta=np.array(json.dumps(text)), **demos)
+    message = (f"{tmp_path / 'text.npz'} was recorded at frame skip '4', but a Minari env spec "
+               "records Hopper-v4's own rate 4: export demos made without --frame-skip")
+    refused_in_process("export", tmp_path / "text.npz", "test/text-v0", message=message)
+    # A NaN was exported into the dataset, which the import then refused.
+    demos["observations"][3, 2] = np.nan
+    np.savez(tmp_path / "nan.npz", meta=np.array(json.dumps(meta)), **demos)
+    message = (f"{tmp_path / 'nan.npz'}: observations has a non-finite value at row 3: "
+               "make the demo file again")
+    refused_in_process("export", tmp_path / "nan.npz", "test/nan-v0", message=message)
+    assert not (minari_store / "test").exists()
