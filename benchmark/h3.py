@@ -180,7 +180,7 @@ def main(argv=None) -> int:
     fix = "pass --reference, the folder of the reports at the paper's setting"
     check_folder(args.reference, "reference folder", fix)
     # Mistyped run folders would show every score as —, with only a warning per seed.
-    existing_runs_dir(REGIME, args.h3_dir, "--h3-dir")
+    existing_runs_dir(REGIME, args.h3_dir, "--h3-dir", "--methods bc_so bc_oh c2f --envs Hopper-v4 --seeds 1 2 3 --save-model")
     existing_runs_dir(REGIME, args.results_dir)
     reports, problems = gather(args.analysis_dir)
     if not reports:

@@ -10,6 +10,7 @@ asked for, this runs benchmark.run_grid over METHODS x ENVS x --seeds into resul
 the commit of the scripts that made the runs: a method's runs in a regime must be made by one code version.
 (The map's first methods share <regime>/runs/commit.txt.)
 """
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -41,14 +42,16 @@ def runs_dir(regime: str, results_dir: Path = RESULTS_DIR) -> Path:
     return Path(results_dir) / regime / "runs"
 
 
-def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR, flag="--results-dir") -> Path:
+def existing_runs_dir(regime: str, results_dir: Path = RESULTS_DIR, flag="--results-dir", runs="") -> Path:
     """runs_dir(regime, results_dir), refused in one line when the regime has not been run there
-    (flag: the option that named results_dir)."""
+    (flag: the option that named results_dir; runs: the runner's flags that make what the folder holds)."""
     folder = runs_dir(regime, results_dir)
     if not folder.is_dir():
         run = f"python -m benchmark.regimes --regimes {regime}"
+        if runs:
+            run += f" {runs}"
         if Path(results_dir) != RESULTS_DIR:  # the runner writes into RESULTS_DIR unless told
-            run += f" --results-dir {results_dir}"
+            run += f" --results-dir {shlex.quote(str(results_dir))}"
         raise UsageError(f"no {folder}: run {run} first, or pass {flag}")
     return folder
 

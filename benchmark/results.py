@@ -53,7 +53,7 @@ def run_cli(main):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so the exit-time flush cannot fail
         sys.exit(1)
     except OSError as error:  # a path that cannot be read or written: a folder, a file in the way, no right to it
-        path = error.filename2 or error.filename  # os.replace(tmp, path) names the path second
+        path = error.filename2 or error.filename or "the output"  # os.replace(tmp, path) names the path second; stdout none
         print(f"error: cannot use {path}: {error.strerror or error}: pass another path", file=sys.stderr)
         sys.exit(2)
     finally:

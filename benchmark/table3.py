@@ -307,7 +307,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     existing_runs_dir(REGIME, args.results_dir)
     # A mistyped folder would leave the capacity test at the map's seeds, with only a warning.
-    existing_runs_dir(REGIME, args.replication_dir, "--replication-dir")
+    existing_runs_dir(REGIME, args.replication_dir, "--replication-dir", "--methods bc_oh c2f --envs Hopper-v4 --seeds 6 7 8 9 10")
     records, replication, problems = gather(args.results_dir, args.replication_dir)
     experts, expert_problems = regime_summary.expert_scores(args.expert_runs, [ENV])
     problems += expert_problems

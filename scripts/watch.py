@@ -204,10 +204,11 @@ def check_every(loaded: tuple, every: int, max_steps: int):
     if length < max_steps:
         limit = f"the {length} steps of an episode of {args.env} at frame skip {args.frame_skip}"
     # Frames are drawn at steps 0, every, 2 * every, ... and at the last step watched.
-    if every >= watched > 1:
+    largest = max(1, watched - 1)
+    if every > largest:
         raise UsageError(
             f"--every {every} is not less than {limit}: no frame would be drawn between the first "
-            f"and the last; pass --every {watched - 1} or less"
+            f"and the last; pass --every {largest} or less"
         )
 
 
@@ -287,7 +288,7 @@ def main(argv=None):
     parser.add_argument(
         "--every",
         type=positive,
-        help="draw a frame every N steps, at most the steps watched "
+        help="draw a frame every N steps, fewer than the steps watched "
         "(default: every 1/25 s of simulated time, or every step)",
     )
     parser.add_argument(

@@ -307,6 +307,9 @@ WATCH_REFUSED_AFTER_LOADING = {  # (edits of the checkpoint, flags) -> the one l
     "every as long as the episode": ({}, ("--max-steps", 5000, "--every", 1000),
                                "--every 1000 is not less than the 1000 steps of an episode of Hopper-v4 at frame skip 4: no "
                                "frame would be drawn between the first and the last; pass --every 999 or less"),
+    # One step watched: a frame of 800 s overflowed the GIF's duration, as above.
+    "one step watched": ({}, ("--max-steps", 1, "--every", 100000), "--every 100000 is not less than --max-steps 1: no frame "
+                                                                   "would be drawn between the first and the last; pass --every 1 or less"),
     # RuntimeError: Trying to create tensor with negative dimension -1.
     "a bad setting": ({"hidden": -1}, (), "{path}: its args hold hidden -1, which is not positive and finite: re-save it "
                                           "with --save-model"),

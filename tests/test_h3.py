@@ -122,8 +122,12 @@ def test_a_mistyped_run_folder_is_one_line_and_exit_2(planted, tmp_path, flag):
     argv = [*argv]
     argv[argv.index(flag) + 1] = str(tmp_path / "nowhere")
     result = run_in_process("benchmark/h3.py", *argv)
+    # The re-made runs need the runner's flags that made them; the map is the runner's default grid.
+    runs = ""
+    if flag == "--h3-dir":
+        runs = " --methods bc_so bc_oh c2f --envs Hopper-v4 --seeds 1 2 3 --save-model"
     message = (f"no {tmp_path / 'nowhere' / 'native_hidden' / 'runs'}: run python -m benchmark.regimes --regimes "
-               f"native_hidden --results-dir {tmp_path / 'nowhere'} first, or pass {flag}")
+               f"native_hidden{runs} --results-dir {tmp_path / 'nowhere'} first, or pass {flag}")
     assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
     assert not (analysis / "h3.md").exists()
 

@@ -244,7 +244,8 @@ def test_a_mistyped_replication_folder_is_one_line_and_exit_2(planted, tmp_path)
     result = run_in_process("benchmark/table3.py", "--results-dir", results, "--replication-dir", tmp_path / "nowhere",
                             "--expert-runs", experts)
     message = (f"no {tmp_path / 'nowhere' / 'native_hidden' / 'runs'}: run python -m benchmark.regimes --regimes native_hidden "
-               f"--results-dir {tmp_path / 'nowhere'} first, or pass --replication-dir")
+               f"--methods bc_oh c2f --envs Hopper-v4 --seeds 6 7 8 9 10 --results-dir {tmp_path / 'nowhere'} first, or pass "
+               "--replication-dir")
     assert (result.returncode, result.stderr) == (2, f"error: {message}\n")
     assert not (results / "native_hidden" / "table3.md").exists()
 
