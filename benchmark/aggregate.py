@@ -49,7 +49,8 @@ class Cell:
     mean: float
     std: float
     count: str
-    """'n=3' (seeds), or for the expert '20 ep.' (episodes of its one evaluation)"""
+    """'n=3' (seeds), or for the expert '20 ep.' (episodes of its one evaluation; '' where its
+    result does not say)"""
 
 
 def collect(results_dir: Path, allow_nonpaper: bool):
@@ -91,7 +92,11 @@ ENV_ORDER = [f"{family}-v4" for family in PAPER_ENV_ORDER]
 def summarise(records: list) -> Cell:
     scores = [record.score for record in records]
     if records[0].method == EXPERT:  # one deterministic evaluation: its spread is over episodes
-        return Cell(statistics.fmean(scores), statistics.fmean(r.episode_std for r in records), f"{records[0].episodes} ep.")
+        # A result without eval_episodes showed "(None ep.)": its count is left out.
+        count = ""
+        if records[0].episodes is not None:
+            count = f"{records[0].episodes} ep."
+        return Cell(statistics.fmean(scores), statistics.fmean(r.episode_std for r in records), count)
     return Cell(statistics.fmean(scores), statistics.pstdev(scores), f"n={len(scores)}")
 
 
@@ -159,7 +164,12 @@ def markdown(records: list, results_dir: Path, out: Path, allow_nonpaper: bool, 
         cells = []
         for env in envs:
             cell, paper = ours.get((method, env)), paper_cell(method, env)
-            cells.append(f"{format_cell(cell.mean, cell.std)} ({cell.count})" if cell else "—")
+            if cell is None:
+                cells.append("—")
+            elif cell.count:
+                cells.append(f"{format_cell(cell.mean, cell.std)} ({cell.count})")
+            else:
+                cells.append(format_cell(cell.mean, cell.std))
             cells.append(format_cell(*paper) if paper else "—")
         lines.append(f"| {METHOD_NAMES.get(method, method)} (`{method}`) | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -17,7 +17,8 @@ The grid accumulates: a combination whose valid result exists, made with the set
 (the paper's unless --extra-args changes them), is skipped. A corrupt or partial result, or one made
 with other settings, is reported and re-run. A run that fails does not stop the others; failures are
 listed at the end and make the exit status 1. `--dry-run` only lists; `--slurm FILE` writes the grid
-as a SLURM array job (one array index per combination) instead of running it.
+as a SLURM array job (one array index per combination) instead of running it (with --dry-run, prints
+it and writes nothing).
 """
 import json
 import os
@@ -451,6 +452,12 @@ def run_all(todo: list, options: Options) -> list:
 def main(argv=None) -> int:
     options = parse_options(argv)
     runs = combinations(options)
+    # A dry run writes nothing: it shows the file instead.
+    if options.slurm is not None and options.dry_run:
+        print(slurm_script(runs, options), end="")
+        job = f"a SLURM array job of {len(runs)} combinations"
+        print(f"dry run: would write {options.slurm}: {job}; nothing written")
+        return 0
     if options.slurm is not None:
         options.results_dir.mkdir(parents=True, exist_ok=True)  # SLURM does not create the --output folder
         write_text(options.slurm, slurm_script(runs, options))

@@ -19,7 +19,9 @@ the original of another copy.
 import ast
 import os
 import re
+import stat
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,6 +122,23 @@ def find_copies(file, source, problems):
     return copies
 
 
+def write_atomically(path, text):
+    """Replace the file at path by text at once: written to a temporary file beside it (a name that
+    does not end in .py, so a leftover is never checked), then renamed over it. A write that fails
+    (a full disk) leaves the file as it was."""
+    path = Path(path)
+    mode = stat.S_IMODE(path.stat().st_mode)
+    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with open(handle, "w") as file:
+            file.write(text)
+        # mkstemp makes the file for its owner only: keep the copy's own permissions.
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
 def check(root, fix=False):
     """Check (with fix: rewrite drifted) copies in root/*.py. Returns (problems, copies checked, rewritten)."""
     root = Path(root)
@@ -159,7 +178,7 @@ def check(root, fix=False):
         if fix:
             lines[copy.block.start - 1 : copy.block.end] = [expected]
             sources[copy.file] = "".join(lines)
-            (root / copy.file).write_text(sources[copy.file])
+            write_atomically(root / copy.file, sources[copy.file])
             rewritten += 1
             print(f"{where}: rewrote copy of {copy.orig_module}.{name} from {orig_where}")
         else:

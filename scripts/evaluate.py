@@ -47,6 +47,8 @@ the GPU; --velocity-dims: None, the built-in layout, unless set, which saved_arg
 older checkpoint's are ignored"""
 METHOD_FILE_NAMES = ("METHOD", "Args", "make_policy", "evaluate", "make_env", "UsageError")
 """what a method file defines that this script uses"""
+MAX_EPISODES = 10_000
+"""the most episodes evaluated: they run at once, one env each (10**11 filled the memory)"""
 
 
 def read_checkpoint(path) -> dict:
@@ -273,8 +275,19 @@ def main(argv=None):
         help="seed of the first episode (episode i: seed + i, its env and its sensor noise)",
     )
     options = parser.parse_args(argv)
+    if options.episodes is not None and options.episodes > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes {options.episodes} is more than {MAX_EPISODES}, the most evaluated "
+            f"(one env each, all at once): pass --episodes {MAX_EPISODES} or less"
+        )
     module, policy, args = load_policy(options.checkpoint)
     episodes = options.episodes or args.eval_episodes
+    if episodes > MAX_EPISODES:
+        raise UsageError(
+            f"{options.checkpoint}: its args hold eval_episodes {episodes}, more than "
+            f"{MAX_EPISODES}, the most evaluated (one env each, all at once): "
+            f"pass --episodes {MAX_EPISODES} or less"
+        )
     noun = "episode"
     if episodes > 1:
         noun = "episodes"

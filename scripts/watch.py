@@ -42,6 +42,8 @@ INSTALL = "install OSMesa (apt-get install libosmesa6) or a GPU driver for EGL"
 MAX_PIXELS = 4096
 """the widest and tallest panel drawn: a 4K frame, well inside OpenGL's offscreen buffers (Mesa's
 EGL and OSMesa refuse sides over 16384) and a GIF's 65535"""
+GIF_PIXELS = 65535
+"""the widest and tallest frame a GIF holds"""
 WHITE = (255, 255, 255)
 BLACK = (0, 0, 0)
 
@@ -316,6 +318,19 @@ def main(argv=None):
                 f"--{name} {value} is more than {MAX_PIXELS} pixels, the largest panel drawn: "
                 f"pass --{name} {MAX_PIXELS} or less"
             )
+    # The panels stand side by side: the frame is as wide as all of them (as tall as one, at most
+    # MAX_PIXELS), and is refused here, before anything is drawn, not when the GIF is saved.
+    panels = len(options.checkpoints)
+    frame_width = panels * options.width
+    if frame_width > GIF_PIXELS:
+        largest = GIF_PIXELS // panels
+        fix = f"pass --width {largest} or less, or fewer checkpoints"
+        if largest == 0:
+            fix = f"pass at most {GIF_PIXELS} checkpoints"
+        raise UsageError(
+            f"{panels} panels of --width {options.width} make a frame {frame_width} pixels wide, "
+            f"more than a GIF's {GIF_PIXELS}: {fix}"
+        )
     settings = {}
     for path in options.checkpoints:
         args = read_checkpoint(path)["args"]

@@ -276,6 +276,20 @@ def test_slurm_script_names_every_combination_exactly_once(scripts, tmp_path, ca
     assert calls(scripts) == ["Ant-v4 2"] and read_result(result_path(results, "fake", "Ant-v4", [2]), "fake", "Ant-v4")["args"]["epochs"] == 2
 
 
+def test_a_dry_run_with_slurm_prints_the_job_and_writes_nothing(scripts, tmp_path, capsys):
+    """--dry-run --slurm FILE wrote FILE (and made --results-dir) as if no --dry-run were given."""
+    results = tmp_path / "runs"
+    script = tmp_path / "grid.sbatch"
+    args = ["--methods", "fake", "--envs", "Hopper-v4", "--seeds", 1, 2, "--slurm", script]
+    assert grid(scripts, results, *args, "--dry-run") == 0
+    shown = capsys.readouterr().out
+    assert not script.exists() and not results.exists() and calls(scripts) == []
+    assert shown.endswith(f"\ndry run: would write {script}: a SLURM array job of 2 combinations; nothing written\n")
+    # without --dry-run the same command writes the job it showed
+    assert grid(scripts, results, *args) == 0
+    assert shown.startswith(script.read_text())
+
+
 def test_the_grid_refuses_a_missing_scripts_dir_and_an_empty_slurm_name(scripts, tmp_path):
     with pytest.raises(run_grid.UsageError, match="--scripts-dir .*nope is not a folder: pass a checkout"):
         grid(tmp_path / "nope", tmp_path / "runs", "--methods", "fake", "--envs", "Hopper-v4", "--dry-run")
@@ -480,6 +494,20 @@ def test_aggregator_numbers_and_refusals(tmp_path, capsys):
     table = (out / "table2.md").read_text()
     assert f"{statistics.fmean([100, 200, 600, 1]):.0f} ± {statistics.pstdev([100, 200, 600, 1]):.0f} (n=4)" in table
     assert "1 seed runs with epochs 2 != 1000, num_demo_samples 300 != 20000" in table
+
+
+def test_an_expert_result_without_its_episode_count_shows_no_count(tmp_path, capsys):
+    """An expert result whose args lack eval_episodes (one written by hand, or by an older runner) read "(None ep.)"."""
+    runs = tmp_path / "runs"
+    out = tmp_path / "out"
+    expert_path = result_path(runs, "expert", "Ant-v4", [0])
+    expert_path.parent.mkdir(parents=True)
+    result = make_result("Ant-v4", "expert", {"env": "Ant-v4", "seeds": [0]}, {0: [[0, 5500.0]]})
+    expert_path.write_text(json.dumps({**result, "std": 42.0}))
+    assert aggregate.main(["--results-dir", str(runs), "--out", str(out)]) == 0
+    table = (out / "table2.md").read_text()
+    assert "| PPO expert (`expert`) | 5500 ± 42 | 5566 |" in table
+    assert "None" not in table and capsys.readouterr().err == ""
 
 
 

@@ -1,6 +1,8 @@
 """Tests of scripts/check_copies.py, the "# Copied from" checker, on tiny files in a temp dir."""
 import os
 import re
+import resource
+import signal
 import subprocess
 import sys
 import textwrap
@@ -122,6 +124,32 @@ def test_fix_restores_the_original_text(root):
     assert copy.read_text() == good
     assert (root / "orig.py").read_text() == ORIGINAL
     assert result.stdout.splitlines()[-1] == "2 copies checked, all match"
+
+
+def limit_file_size():
+    """In the child: files may not grow past 64 bytes (a full disk, in effect), and the write fails with EFBIG
+    instead of the process being killed by SIGXFSZ."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (64, 64))
+
+
+def test_fix_replaces_a_copy_at_once_and_a_failed_write_leaves_it_as_it_was(root):
+    """--fix rewrote a copy in place: a write that failed midway (a full disk) left the copy cut short, its end lost.
+    It now writes a temporary file beside the copy and renames it over the copy: no temporary file is left either way,
+    and the copy keeps its permissions."""
+    copy = root / "copy.py"
+    drifted = copy.read_text().replace("size = 3", "size = 4")
+    copy.write_text(drifted)
+    copy.chmod(0o754)
+    command = [sys.executable, str(REPO_ROOT / "scripts/check_copies.py"), "--root", str(root), "--fix"]
+    failed = subprocess.run(command, check=False, capture_output=True, text=True, timeout=60, preexec_fn=limit_file_size)
+    assert failed.returncode == 2 and "Traceback" not in failed.stderr, failed.stderr
+    assert copy.read_text() == drifted
+    assert sorted(path.name for path in root.iterdir()) == ["copy.py", "orig.py"]
+    fixed = check_copies(root, "--fix")
+    assert fixed.returncode == 0, fixed.stderr
+    assert copy.read_text() == COPY and (copy.stat().st_mode & 0o777) == 0o754
+    assert sorted(path.name for path in root.iterdir()) == ["copy.py", "orig.py"]
 
 
 def test_copies_of_copies_compare_with_their_immediate_original(root):

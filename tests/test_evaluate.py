@@ -160,6 +160,25 @@ def test_a_negative_seed_is_refused_in_one_line(trained):
     assert_usage_error(result, "argument --seed: invalid non_negative value: '-1'")
 
 
+def test_more_episodes_than_can_run_at_once_are_refused_in_one_line_before_the_checkpoint_loads(tmp_path):
+    """--episodes 10**11 built a list of 10**11 envs: a MemoryError traceback after minutes, or the machine's memory
+    filled. The flag is refused before the checkpoint is read (a missing file would be refused otherwise)."""
+    result = run_in_process("scripts/evaluate.py", tmp_path / "nowhere.pt", "--episodes", 10**11)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == ("error: --episodes 100000000000 is more than 10000, the most evaluated (one env each, all at once): "
+                             "pass --episodes 10000 or less\n")
+
+
+def test_a_checkpoints_eval_episodes_beyond_the_bound_is_refused_unless_episodes_is_given(trained, tmp_path):
+    """Without --episodes a run's --eval-episodes is played: a hand-edited 10**11 filled the memory as the flag did."""
+    path = edited(trained("bc_oh")[0], tmp_path, eval_episodes=10**11)
+    result = run_in_process("scripts/evaluate.py", path)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == (f"error: {path}: its args hold eval_episodes 100000000000, more than 10000, the most evaluated "
+                             "(one env each, all at once): pass --episodes 10000 or less\n")
+    assert evaluate(path, "--episodes", 1)[1]  # --episodes overrides it
+
+
 BAD_SETTINGS = {  # a hand-edited value -> what the one line says of it, before ": re-save it with --save-model"
     "env 5": ({"env": 5}, "its args hold env 5, which is not a str"),
     "frame skip 0": ({"frame_skip": 0}, "its args hold frame_skip 0, which is not positive and finite"),
@@ -287,6 +306,20 @@ def test_watch_refuses_a_panel_larger_than_4096_pixels_in_one_line(trained, tmp_
     result = run_in_process("scripts/watch.py", trained("bc_oh")[0], "--output", tmp_path / "w.gif", f"--{side}", 20000)
     assert (result.returncode, result.stdout) == (2, "")
     assert result.stderr == f"error: --{side} 20000 is more than 4096 pixels, the largest panel drawn: pass --{side} 4096 or less\n"
+
+
+def test_watch_refuses_a_frame_wider_than_a_gif_holds_in_one_line_before_loading_anything(tmp_path):
+    """16 panels of --width 4096 side by side: 65536 pixels, one more than a GIF holds. Every frame was drawn, then
+    saving the GIF failed with an OverflowError traceback. The panels' files are not read first (here there are none:
+    15 panels, a frame of 61440 pixels, go on to be refused as not found)."""
+    missing = tmp_path / "nowhere.pt"
+    result = run_in_process("scripts/watch.py", *[missing] * 16, "--output", tmp_path / "w.gif", "--width", 4096)
+    assert (result.returncode, result.stdout) == (2, "")
+    assert result.stderr == ("error: 16 panels of --width 4096 make a frame 65536 pixels wide, more than a GIF's 65535: "
+                             "pass --width 4095 or less, or fewer checkpoints\n")
+    fits = run_in_process("scripts/watch.py", *[missing] * 15, "--output", tmp_path / "w.gif", "--width", 4096)
+    assert_usage_error(fits, f"checkpoint {missing} not found")
+    assert not (tmp_path / "w.gif").exists()
 
 
 def test_watch_refuses_checkpoints_whose_env_cannot_be_compared_in_one_line(trained, tmp_path):
