@@ -17,6 +17,8 @@ import os
 import signal
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -526,16 +528,23 @@ def run(args):
         else:
             # spawn, not fork: torch and MuJoCo are not fork-safe.
             context = multiprocessing.get_context("spawn")
-            with context.Pool(workers, initializer=start_worker) as pool:
-                entries = pool.starmap(train_and_record, jobs, chunksize=1)
-    except KeyboardInterrupt:
-        # Leaving the pool's block has stopped the workers; the finished seeds' results stay.
+            pool = ProcessPoolExecutor(workers, context, initializer=start_worker)
+            entries = list(pool.map(train_and_record, *zip(*jobs)))
+    except (KeyboardInterrupt, BrokenProcessPool) as error:
+        # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
         finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
-        message = "interrupted: no seed finished"
+        message = "no seed finished"
         if finished:
-            message = f"interrupted: seeds {finished} finished, their results are in {output_dir}"
-        print(message, file=sys.stderr)
+            message = f"seeds {finished} finished, their results are in {output_dir}"
+        if isinstance(error, BrokenProcessPool):
+            print(f"a worker died (killed, or out of memory?): {message}", file=sys.stderr)
+            sys.exit(1)
+        print(f"interrupted: {message}", file=sys.stderr)
         sys.exit(130)
+    finally:
+        # Stop every worker at once, busy or idle: their own exit (freeing torch) takes seconds.
+        for worker in multiprocessing.active_children():
+            worker.terminate()
 
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)
@@ -562,3 +571,7 @@ if __name__ == "__main__":
     except UsageError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:
+        # Ctrl-C before the seeds start (while the env and demos load) or after they end.
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)

@@ -1,6 +1,5 @@
 """--seeds 1 2 --workers 2 trains the seeds in two processes at once (issue 22): each seed prints and scores
 exactly what it does when the seeds run one after another, and the combined result holds both, in order."""
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -74,21 +73,17 @@ def test_by_default_each_seed_has_its_own_worker(tmp_path, monkeypatch, flags, c
 
     pools = []
 
-    class Pool:
-        def __init__(self, workers, initializer):
+    class ProcessPoolExecutor:
+        def __init__(self, workers, context, initializer):
             pools.append(workers)
 
-        def __enter__(self):
-            return self
+        def map(self, function, *columns):
+            return map(function, *columns)
 
-        def __exit__(self, *exception):
-            return False
+        def shutdown(self):
+            pass
 
-        def starmap(self, function, jobs, chunksize):
-            return [function(*job) for job in jobs]
-
-    context = SimpleNamespace(Pool=Pool)
-    monkeypatch.setattr(bc_oh.multiprocessing, "get_context", lambda method: context)
+    monkeypatch.setattr(bc_oh, "ProcessPoolExecutor", ProcessPoolExecutor)
     monkeypatch.setattr(bc_oh.os, "cpu_count", lambda: cores)
     skip_evaluation(monkeypatch, bc_oh)
     np.savez(tmp_path / "demos.npz", **fake_demos(256))

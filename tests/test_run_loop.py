@@ -1,6 +1,7 @@
 """The seed loop every method file shares (bc_oh.run, copied into the others): a clean interrupt that stops every
 process of the job, each seed's minutes left, distinct seeds, the summary's share of the expert, and the demo checks'
 messages."""
+import contextlib
 import json
 import os
 import signal
@@ -14,7 +15,7 @@ import pytest
 import torch
 
 import bc_oh
-from conftest import REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
+from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
 
 
 def live_processes(group: int) -> list:
@@ -59,6 +60,37 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
     assert not live_processes(job.pid), "every process of the job has ended"
     assert job.returncode == 130 and "Traceback" not in stderr, stderr
     assert stderr.strip().splitlines() == ["interrupted: no seed finished"]
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc (Linux)")
+def test_a_worker_killed_mid_seed_ends_the_job_in_one_line_instead_of_a_hang(tmp_path):
+    """The out-of-memory killer (here `kill -9`) ends a seed's worker: multiprocessing.Pool waited forever for its
+    result. Now the job stops its other workers, says what happened and what it kept, and exits 1."""
+    link_experts(tmp_path)
+    command = [sys.executable, str(REPO_ROOT / "bc_oh.py"), "--seeds", "1", "2", "--workers", "2", "--epochs", "20000",
+               "--num-demo-samples", "300", "--eval-every", "1000", "--output-dir", str(tmp_path / "out")]
+    job = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                           env=dict(os.environ, PYTHONWARNINGS="ignore", PYTHONUNBUFFERED="1"))
+    started = set()
+    for line in job.stdout:  # wait until both workers train
+        if line.startswith("seed ") and line.rstrip().endswith("| training"):
+            started.add(line)
+        if len(started) == 2:
+            break
+    workers = [pid for pid in live_processes(job.pid) if "spawn_main" in Path(f"/proc/{pid}/cmdline").read_text()]
+    assert len(workers) == 2
+    os.kill(workers[0], signal.SIGKILL)
+    try:
+        _, stderr = job.communicate(timeout=60)
+    finally:
+        with contextlib.suppress(ProcessLookupError):  # the old code hangs: end it whatever happens
+            os.killpg(job.pid, signal.SIGKILL)
+    assert job.returncode == 1 and "Traceback" not in stderr, stderr
+    assert stderr.strip().splitlines() == ["a worker died (killed, or out of memory?): no seed finished"]
+    deadline = time.time() + 20
+    while live_processes(job.pid) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not live_processes(job.pid), "every process of the job has ended"
 
 
 def test_the_progress_line_gives_the_seeds_own_minutes_left(monkeypatch, capsys):
@@ -219,3 +251,21 @@ def test_missing_demos_name_the_command_that_makes_them(tmp_path, monkeypatch):
     # A path the user gave: expert_ppo.py would not write it, so no command is named.
     result = run_in_process("bc_oh.py", "--demos", "mine.npz")
     assert result.stderr.strip() == f"error: demo file mine.npz not found in {tmp_path}: check --demos"
+
+
+@pytest.mark.parametrize("script", METHOD_FILES)
+def test_an_interrupt_while_the_demos_load_is_one_line(tmp_path, monkeypatch, script):
+    """Ctrl-C (or `kill`, SIGTERM) in the second before the seeds start printed a KeyboardInterrupt traceback."""
+    np.savez(tmp_path / "demos.npz", **fake_demos(256))
+
+    def interrupted_load(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "load", interrupted_load)
+    out = tmp_path / "out"
+    try:
+        result = run_in_process(script, "--demos", tmp_path / "demos.npz", "--output-dir", out)
+    except KeyboardInterrupt:
+        pytest.fail("the interrupt came out of the command as a traceback")
+    assert (result.returncode, result.stderr) == (130, "interrupted\n")
+    assert not out.exists(), "nothing was written"

@@ -43,15 +43,15 @@ def test_the_files_users_copy_pass_ruff_check_with_no_line_over_100():
 
 
 CEILINGS = {
-    "bc_oh": 534,
-    "bc_so": 536,
-    "history_dropout": 546,
-    "c2f": 564,
-    "fca": 639,
-    "keyframe": 631,
-    "average_ensemble": 614,
-    "dagger": 690,
-    "c2f_table3": 663,
+    "bc_oh": 547,
+    "bc_so": 549,
+    "history_dropout": 559,
+    "c2f": 577,
+    "fca": 652,
+    "keyframe": 644,
+    "average_ensemble": 627,
+    "dagger": 703,
+    "c2f_table3": 676,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
