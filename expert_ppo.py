@@ -114,7 +114,8 @@ class Agent(nn.Module):
     def action_and_value(self, obs, action=None):
         mean = self.actor_mean(obs)
         std = self.actor_logstd.expand_as(mean).exp()
-        dist = torch.distributions.Normal(mean, std)
+        # Not validated: train refuses the NaN weights of a diverged update itself, in one line.
+        dist = torch.distributions.Normal(mean, std, validate_args=False)
         if action is None:
             action = dist.sample()
         return action, dist.log_prob(action).sum(-1), dist.entropy().sum(-1), self.value(obs)
@@ -129,18 +130,17 @@ class RunningMeanStd:
         self.count = 1e-4
 
     def update(self, batch: np.ndarray):
-        batch_mean = batch.mean(0)
-        batch_var = batch.var(0)
         batch_count = batch.shape[0]
-        delta = batch_mean - self.mean
+        delta = batch.mean(0) - self.mean
         total = self.count + batch_count
         self.mean = self.mean + delta * batch_count / total
         correction = delta**2 * self.count * batch_count / total
-        self.var = (self.var * self.count + batch_var * batch_count + correction) / total
+        self.var = (self.var * self.count + batch.var(0) * batch_count + correction) / total
         self.count = total
 
-    def normalize(self, x: np.ndarray) -> np.ndarray:
-        return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
+    def normalize(self, x: np.ndarray) -> torch.Tensor:
+        clipped = np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -10.0, 10.0)
+        return torch.as_tensor(clipped, dtype=torch.float32)
 
 
 # ---- Training: rollouts, advantages (GAE), the clipped update, checkpoints ----
@@ -153,6 +153,7 @@ def validate(args: Args):
         value = getattr(args, name)
         flag = "--" + name.replace("_", "-")
         require(0 < value < np.inf, f"{flag} must be positive and finite, got {value}")
+    require(args.clip_coef < 1e38, f"--clip-coef must be below 1e38, got {args.clip_coef}")
     # 0 is allowed here (no entropy bonus, no time limit); NaN or a negative value is refused.
     for name in ["ent_coef", "vf_coef", "max_minutes"]:
         value = getattr(args, name)
@@ -177,6 +178,7 @@ def train(args: Args):
         os.makedirs(output_dir, exist_ok=True)
     except (KeyError, IndexError, ValueError, OSError) as error:
         raise UsageError(f"cannot make --output-dir {args.output_dir} ({error!r}): pass another")
+    require(os.access(output_dir, os.W_OK), f"--output-dir {output_dir} is read-only: pass another")
     latest_path = os.path.join(output_dir, "latest.pt")
     best_path = os.path.join(output_dir, "best.pt")
     torch.manual_seed(args.seed)
@@ -256,11 +258,7 @@ def train(args: Args):
     elif args.resume:
         print(f"no {latest_path} yet: starting fresh")
 
-    def normalized(raw: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(obs_rms.normalize(raw), dtype=torch.float32)
-
     batch_size = args.num_envs * args.num_steps
-    minibatch_size = batch_size // args.num_minibatches
     obs_buf = torch.zeros((args.num_steps, args.num_envs, obs_dim))
     act_buf = torch.zeros((args.num_steps, args.num_envs, act_dim))
     logp_buf = torch.zeros((args.num_steps, args.num_envs))
@@ -287,7 +285,7 @@ def train(args: Args):
         with torch.no_grad():
             for step in range(args.num_steps):
                 obs_rms.update(raw_obs)
-                obs = normalized(raw_obs)
+                obs = obs_rms.normalize(raw_obs)
                 action, logp, _, value = agent.action_and_value(obs)
                 clipped_action = action.numpy().clip(action_low, action_high)
                 raw_obs, reward, terminated, truncated, info = envs.step(clipped_action)
@@ -300,16 +298,13 @@ def train(args: Args):
                 # A time limit is not a death: bootstrap from the value of the last observation.
                 if truncated.any():
                     final_obs = raw_obs.copy()
-                    for i in np.flatnonzero(truncated):
-                        final_obs[i] = info["final_obs"][i]
-                    final_value = agent.value(normalized(final_obs)).numpy()
+                    final_obs[truncated] = np.stack(info["final_obs"][truncated])
+                    final_value = agent.value(obs_rms.normalize(final_obs)).numpy()
                     bootstrap = (truncated & ~terminated).astype(np.float32)
                     scaled_reward = scaled_reward + args.gamma * final_value * bootstrap
-                for i in np.flatnonzero(done):
-                    recent_returns.append(episode_return[i])
-                    recent_returns = recent_returns[-20:]
-                    episode_return[i] = 0.0
-                    discounted_return[i] = 0.0
+                recent_returns = (recent_returns + list(episode_return[done]))[-20:]
+                episode_return[done] = 0.0
+                discounted_return[done] = 0.0
 
                 obs_buf[step] = obs
                 act_buf[step] = action
@@ -319,7 +314,7 @@ def train(args: Args):
                 done_buf[step] = torch.as_tensor(done, dtype=torch.float32)
 
             # ---- Generalised advantage estimation (GAE); done[t] ends the episode after step t
-            next_value = agent.value(normalized(raw_obs))
+            next_value = agent.value(obs_rms.normalize(raw_obs))
             advantages = torch.zeros_like(rew_buf)
             last_gae = 0.0
             for t in reversed(range(args.num_steps)):
@@ -337,7 +332,7 @@ def train(args: Args):
         b_adv = advantages.reshape(-1)
         b_ret = returns.reshape(-1)
         for _ in range(args.update_epochs):
-            for idx in torch.randperm(batch_size).split(minibatch_size):
+            for idx in torch.randperm(batch_size).split(batch_size // args.num_minibatches):
                 _, new_logp, entropy, new_value = agent.action_and_value(b_obs[idx], b_act[idx])
                 ratio = (new_logp - b_logp[idx]).exp()
                 adv = (b_adv[idx] - b_adv[idx].mean()) / (b_adv[idx].std() + 1e-8)
@@ -349,6 +344,9 @@ def train(args: Args):
                 loss.backward()
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
+        finite = nn.utils.parameters_to_vector(agent.parameters()).isfinite().all()
+        diverged = f"training diverged at step {global_step} (non-finite weights after an update)"
+        require(finite, f"{diverged}: use a smaller --learning-rate (or --vf-coef, --ent-coef)")
 
         # ---- Progress, evaluation, checkpoints (ExpertPolicy's init draws on torch's RNG too)
         elapsed = time.time() - start_time
@@ -470,6 +468,8 @@ def eval_only(args: Args):
     native = env_frame_skip(args.env)
     env_frame_skip(args.env, args.frame_skip)
     require(args.eval_episodes > 0, f"--eval-episodes must be positive, got {args.eval_episodes}")
+    folder = f"--ship-to {args.ship_to} is a folder: give the path of the file to write"
+    require(args.ship_to is None or not os.path.isdir(args.ship_to), folder)
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
         recorded = checkpoint["env_id"]
@@ -498,9 +498,8 @@ def eval_only(args: Args):
         print(f"episode {i}: return {episode_return:.1f}")
     mean, std = float(np.mean(returns)), float(np.std(returns))
     if args.ship_to:
-        # e.g. experts/Hopper-v4.pt: the checkpoint carries the return it was shipped with.
+        # e.g. experts/Hopper-v4.pt, recording its return (and, retargeted, the env it came from).
         checkpoint.update(eval_return=mean, eval_std=std, eval_episodes=len(returns))
-        # The expert loaded: recorded is the env it was made for.
         if recorded != args.env:
             checkpoint.update(env_id=args.env, retargeted_from=recorded)
         save_atomically(checkpoint, args.ship_to)
@@ -650,6 +649,7 @@ def make_demos(args: Args):
     expert_path = args.checkpoint.replace("{env}", args.env)
     rate = "" if frame_skip == native else f"_fs{frame_skip}"
     path = f"demos/{args.env}{rate}_{num_samples}.npz"
+    require(not os.path.isfile("demos"), f"./demos is a file in the way of {path}: move it")
     expert = load_expert(expert_path, args.env)
     with open(expert_path, "rb") as file:
         expert_sha256 = hashlib.sha256(file.read()).hexdigest()

@@ -1,5 +1,6 @@
 """Tests of expert_ppo.py: a tiny training run, its checkpoint, resuming, evaluation, --make-demos and bad input."""
 import contextlib
+import errno
 import hashlib
 import os
 import re
@@ -7,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -136,6 +138,8 @@ def test_shipped_expert_scores_well():
         (["--gae-lambda", -0.1], "--gae-lambda must be in [0, 1], got -0.1"),
         # An infinite rate trained, and shipped, a NaN expert; a negative seed raised in gymnasium.
         (["--learning-rate", "inf"], "--learning-rate must be positive and finite, got inf"),
+        # Past float32's range: torch's clamp raised "value cannot be converted to type float without overflow".
+        (["--clip-coef", "1e40"], "--clip-coef must be below 1e38, got 1e+40"),
         (["--seed", -1], "--seed must lie in [0, 2**32), got -1"),
         # NaN weights raised in torch.distributions, a negative one trained a wrong expert in silence.
         (["--ent-coef", "nan"], "--ent-coef must lie in [0, inf), got nan"),
@@ -146,7 +150,7 @@ def test_shipped_expert_scores_well():
     ],
     ids=["unknown-env", "discrete-env", "missing-checkpoint", "braces-in-checkpoint", "corrupt-checkpoint", "other-env-checkpoint", "zero-timesteps", "zero-lr",
          "zero-frame-skip", "frame-skip-non-mujoco", "frame-skip-over-an-episode", "ship-at-other-rate", "gamma-above-1", "gamma-nan", "negative-gae-lambda",
-         "infinite-lr", "negative-seed", "nan-ent-coef", "negative-vf-coef", "minibatch-of-one", "minibatches-not-dividing"],
+         "infinite-lr", "huge-clip-coef", "negative-seed", "nan-ent-coef", "negative-vf-coef", "minibatch-of-one", "minibatches-not-dividing"],
 )
 def test_bad_input_is_one_clear_line(args, message, checkpoint, tmp_path, monkeypatch):
     (tmp_path / "garbage.pt").write_bytes(np.random.default_rng(0).bytes(4096))
@@ -242,15 +246,79 @@ def test_a_checkpoint_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == [], "no temporary file is left"
 
 
-def test_a_file_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
-    """--ship-to a folder, and --make-demos where demos/ is a file, raised IsADirectoryError and FileExistsError."""
+def read_only(folder, monkeypatch):
+    """Play a read-only mount at folder (chmod does not stop root): os.access says no to writing there, and os.replace,
+    which moves a finished temporary file into place, fails as the OS would."""
+    access = os.access
+
+    def no_write_access(path, mode, *args, **kwargs):
+        return not (Path(path) == folder and mode & os.W_OK) and access(path, mode, *args, **kwargs)
+
+    def refuse(source, target):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(os, "access", no_write_access)
+    monkeypatch.setattr(os, "replace", refuse)
+
+
+@pytest.mark.parametrize("case", ["ship-to-a-folder", "demos-is-a-file", "read-only-output-dir"])
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(case, tmp_path, monkeypatch):
+    """--ship-to a folder, a file named demos where --make-demos puts its folder, and a read-only --output-dir were
+    refused in one line only once the work was done (the evaluation episodes, the demo rollout, training up to the
+    first checkpoint), and the demos case named the file it wanted to write, not the one in the way. Each is refused
+    now before the work starts: nothing printed on stdout (each mode prints as it works), nothing written."""
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "demos").write_text("")
-    result = run_in_process("expert_ppo.py", "--eval-only", "--eval-episodes", 1, "--checkpoint", SHIPPED_EXPERT, "--ship-to", tmp_path)
-    assert_usage_error(result, f"cannot write {tmp_path} (Is a directory): check the path and its folder")
-    result = run_in_process("expert_ppo.py", "--make-demos", "--num-demo-samples", 20, "--checkpoint", SHIPPED_EXPERT)
-    assert_usage_error(result, "cannot write demos/Hopper-v4_20.npz (File exists): check the path and its folder")
-    assert sorted(path.name for path in tmp_path.iterdir()) == ["demos"], "no temporary file is left"
+    (tmp_path / "demos").write_text("mine")
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    if case == "ship-to-a-folder":
+        flags = ["--eval-only", "--eval-episodes", 1, "--checkpoint", SHIPPED_EXPERT, "--ship-to", folder]
+        message = f"--ship-to {folder} is a folder: give the path of the file to write"
+    elif case == "demos-is-a-file":
+        flags = ["--make-demos", "--num-demo-samples", 20, "--checkpoint", SHIPPED_EXPERT]
+        message = "./demos is a file in the way of demos/Hopper-v4_20.npz: move it"
+    else:
+        read_only(folder, monkeypatch)
+        flags = [*TINY, "--total-timesteps", 1024, "--output-dir", folder]
+        message = f"--output-dir {folder} is read-only: pass another"
+    result = run_in_process("expert_ppo.py", *flags)
+    assert_usage_error(result, message)
+    assert result.returncode == 2 and result.stdout == "", "refused before any episode, rollout or training step"
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["demos", "folder"] and list(folder.iterdir()) == []
+    assert (tmp_path / "demos").read_text() == "mine"
+
+
+DIVERGED = "(non-finite weights after an update): use a smaller --learning-rate (or --vf-coef, --ent-coef)"
+
+
+@pytest.mark.parametrize("rate, step", [(1e10, 1024), (10, None)], ids=["rate-1e10", "rate-10"])
+def test_a_diverged_training_is_one_line_and_saves_no_nan_weights(rate, step, tmp_path):
+    """--learning-rate 1e10 made the weights NaN within the first update, and the next forward pass raised torch's
+    ValueError (Normal: invalid scale) in a traceback; 10 made them NaN at the last step of an update, which the run
+    saved as latest.pt before the next rollout raised. Now one line names the problem and the fix (exit 2), and the
+    run stops before it saves or evaluates NaN weights."""
+    flags = [*TINY, "--save-every-steps", 1024, "--total-timesteps", 4096, "--learning-rate", rate]
+    result = run_in_process("expert_ppo.py", *flags, "--output-dir", tmp_path, "--max-minutes", 0.2)
+    assert_usage_error(result, f"training diverged at step {step or ''}")
+    assert result.stderr.rstrip().endswith(DIVERGED) and result.returncode == 2
+    for path in tmp_path.iterdir():  # the checkpoints of the updates before the one that diverged, if any
+        assert all(torch.isfinite(weights).all() for weights in load(path)["agent"].values()), path.name
+    if step == 1024:  # nothing was saved, not even a progress line printed
+        assert result.stdout == "" and list(tmp_path.iterdir()) == []
+
+
+def test_a_diverged_resume_keeps_the_checkpoints_already_written(tiny_run, tmp_path):
+    """A --resume at --learning-rate 1e10 raised torch's ValueError in its first update. Now it stops there in one
+    line, and latest.pt and best.pt stay as they were, for a --resume at a sound rate."""
+    run_dir = tmp_path / "run"
+    shutil.copytree(tiny_run[0], run_dir)
+    before = {name: (run_dir / name).read_bytes() for name in ("latest.pt", "best.pt")}
+    flags = [*TINY, "--save-every-steps", 1024, "--total-timesteps", 8192, "--learning-rate", 1e10, "--resume"]
+    result = run_in_process("expert_ppo.py", *flags, "--output-dir", run_dir)
+    assert_usage_error(result, f"training diverged at step 5120 {DIVERGED}")
+    assert result.returncode == 2 and result.stdout.splitlines() == [f"resumed from {run_dir / 'latest.pt'} at step 4096"]
+    assert {name: (run_dir / name).read_bytes() for name in before} == before
+    assert sorted(path.name for path in run_dir.iterdir()) == ["best.pt", "latest.pt"]
 
 
 # ----------------------------------------------------------------------------------------------
