@@ -14,7 +14,7 @@ import os
 import signal
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -504,6 +504,7 @@ def run(args):
         workers = 1
     print(f"progress lines: loss = {LOSS}; last eval = the mean return of the latest evaluation")
     jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
+    callers_children = set(multiprocessing.active_children())
     try:
         if workers == 1:
             entries = [train_and_record(*job) for job in jobs]
@@ -511,7 +512,10 @@ def run(args):
             # spawn, not fork: torch and MuJoCo are not fork-safe.
             context = multiprocessing.get_context("spawn")
             pool = ProcessPoolExecutor(workers, context, initializer=start_worker)
-            entries = list(pool.map(train_and_record, *zip(*jobs)))
+            futures = [pool.submit(train_and_record, *job) for job in jobs]
+            # Every seed runs to its end, even when another fails, before the results are read.
+            wait(futures)
+            entries = [future.result() for future in futures]
     except (KeyboardInterrupt, BrokenProcessPool) as error:
         # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
         finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
@@ -519,13 +523,13 @@ def run(args):
         if finished:
             message = f"seeds {finished} finished, their results are in {output_dir}"
         if isinstance(error, BrokenProcessPool):
-            print(f"a worker died (killed, or out of memory?): {message}", file=sys.stderr)
+            print(f"a worker died (killed, out of memory or crashed): {message}", file=sys.stderr)
             sys.exit(1)
         print(f"interrupted: {message}", file=sys.stderr)
         sys.exit(130)
     finally:
-        # Stop every worker at once, busy or idle: their own exit (freeing torch) takes seconds.
-        for worker in multiprocessing.active_children():
+        # Stop the pool's workers at once (their own exit takes seconds), not the caller's children.
+        for worker in set(multiprocessing.active_children()) - callers_children:
             worker.terminate()
 
     per_seed = dict(zip(args.seeds, entries))
