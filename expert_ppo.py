@@ -247,6 +247,8 @@ def train(args: Args):
             optimizer.load_state_dict(state["optimizer"])
         except Exception as error:
             raise UsageError(f"{cannot} ({type(error).__name__}): check --hidden or drop --resume")
+        finite = nn.utils.parameters_to_vector(agent.parameters()).isfinite().all()
+        require(finite, f"{cannot}: its weights are not finite (a diverged run): delete it")
         # state["args"] is a record only, never read back: the flags given now rule.
         for rms, name in ((obs_rms, "obs"), (ret_rms, "ret")):
             rms.mean = state[f"{name}_mean"].numpy()
@@ -345,8 +347,7 @@ def train(args: Args):
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
         finite = nn.utils.parameters_to_vector(agent.parameters()).isfinite().all()
-        diverged = f"training diverged at step {global_step} (non-finite weights after an update)"
-        require(finite, f"{diverged}: use a smaller --learning-rate (or --vf-coef, --ent-coef)")
+        require(finite, f"training diverged at step {global_step}: use a smaller --learning-rate")
 
         # ---- Progress, evaluation, checkpoints (ExpertPolicy's init draws on torch's RNG too)
         elapsed = time.time() - start_time
@@ -375,8 +376,7 @@ def train(args: Args):
     save_atomically(checkpoint(), latest_path)
     envs.close()
     if global_step < args.total_timesteps:
-        stopped = f"stopped after {args.max_minutes} min at step {global_step}"
-        print(f"{stopped}: continue with the same command and --resume")
+        print(f"stopped after {args.max_minutes} min at step {global_step}: rerun it with --resume")
         return
     # The final evaluation: seeds 10000, 10001, ..., as --eval-only.
     policy = ExpertPolicy(checkpoint())

@@ -456,7 +456,8 @@ def main(argv=None) -> int:
     if options.slurm is not None and options.dry_run:
         print(slurm_script(runs, options), end="")
         job = f"a SLURM array job of {len(runs)} combinations"
-        print(f"dry run: would write {options.slurm}: {job}; nothing written")
+        # A comment line: the output redirected to a file is still a job script.
+        print(f"# dry run: would write {options.slurm}: {job}; nothing written")
         return 0
     if options.slurm is not None:
         options.results_dir.mkdir(parents=True, exist_ok=True)  # SLURM does not create the --output folder

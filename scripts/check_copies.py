@@ -128,15 +128,20 @@ def write_atomically(path, text):
     (a full disk) leaves the file as it was."""
     path = Path(path)
     mode = stat.S_IMODE(path.stat().st_mode)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = None
     try:
+        handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with open(handle, "w") as file:
             file.write(text)
         # mkstemp makes the file for its owner only: keep the copy's own permissions.
         os.chmod(tmp, mode)
         os.replace(tmp, path)
+    except OSError as error:
+        fix = "free disk space or make its folder writable; it is unchanged"
+        raise UsageError(f"--fix cannot rewrite {path} ({error.strerror}): {fix}")
     finally:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
 
 
 def check(root, fix=False):

@@ -284,7 +284,7 @@ def test_a_dry_run_with_slurm_prints_the_job_and_writes_nothing(scripts, tmp_pat
     assert grid(scripts, results, *args, "--dry-run") == 0
     shown = capsys.readouterr().out
     assert not script.exists() and not results.exists() and calls(scripts) == []
-    assert shown.endswith(f"\ndry run: would write {script}: a SLURM array job of 2 combinations; nothing written\n")
+    assert shown.endswith(f"\n# dry run: would write {script}: a SLURM array job of 2 combinations; nothing written\n")
     # without --dry-run the same command writes the job it showed
     assert grid(scripts, results, *args) == 0
     assert shown.startswith(script.read_text())

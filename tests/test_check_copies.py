@@ -144,6 +144,8 @@ def test_fix_replaces_a_copy_at_once_and_a_failed_write_leaves_it_as_it_was(root
     command = [sys.executable, str(REPO_ROOT / "scripts/check_copies.py"), "--root", str(root), "--fix"]
     failed = subprocess.run(command, check=False, capture_output=True, text=True, timeout=60, preexec_fn=limit_file_size)
     assert failed.returncode == 2 and "Traceback" not in failed.stderr, failed.stderr
+    fix = "free disk space or make its folder writable; it is unchanged"
+    assert failed.stderr == f"error: --fix cannot rewrite {copy} (File too large): {fix}\n"
     assert copy.read_text() == drifted
     assert sorted(path.name for path in root.iterdir()) == ["copy.py", "orig.py"]
     fixed = check_copies(root, "--fix")

@@ -288,23 +288,21 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(case, tmp_p
     assert (tmp_path / "demos").read_text() == "mine"
 
 
-DIVERGED = "(non-finite weights after an update): use a smaller --learning-rate (or --vf-coef, --ent-coef)"
+DIVERGED = ": use a smaller --learning-rate"
 
 
-@pytest.mark.parametrize("rate, step", [(1e10, 1024), (10, None)], ids=["rate-1e10", "rate-10"])
-def test_a_diverged_training_is_one_line_and_saves_no_nan_weights(rate, step, tmp_path):
+@pytest.mark.parametrize("rate", [1e10, 10], ids=["rate-1e10", "rate-10"])
+def test_a_diverged_training_is_one_line_and_saves_no_nan_weights(rate, tmp_path):
     """--learning-rate 1e10 made the weights NaN within the first update, and the next forward pass raised torch's
-    ValueError (Normal: invalid scale) in a traceback; 10 made them NaN at the last step of an update, which the run
-    saved as latest.pt before the next rollout raised. Now one line names the problem and the fix (exit 2), and the
-    run stops before it saves or evaluates NaN weights."""
+    ValueError (Normal: invalid scale) in a traceback; 10 made them NaN within the first update too, which the run saved
+    as latest.pt before the next rollout raised. Now one line names the problem and the fix (exit 2), and the run stops
+    before it saves or evaluates NaN weights."""
     flags = [*TINY, "--save-every-steps", 1024, "--total-timesteps", 4096, "--learning-rate", rate]
     result = run_in_process("expert_ppo.py", *flags, "--output-dir", tmp_path, "--max-minutes", 0.2)
-    assert_usage_error(result, f"training diverged at step {step or ''}")
-    assert result.stderr.rstrip().endswith(DIVERGED) and result.returncode == 2
-    for path in tmp_path.iterdir():  # the checkpoints of the updates before the one that diverged, if any
-        assert all(torch.isfinite(weights).all() for weights in load(path)["agent"].values()), path.name
-    if step == 1024:  # nothing was saved, not even a progress line printed
-        assert result.stdout == "" and list(tmp_path.iterdir()) == []
+    assert_usage_error(result, f"training diverged at step 1024{DIVERGED}")
+    assert result.returncode == 2
+    # nothing was saved, not even a progress line printed
+    assert result.stdout == "" and list(tmp_path.iterdir()) == []
 
 
 def test_a_diverged_resume_keeps_the_checkpoints_already_written(tiny_run, tmp_path):
@@ -315,11 +313,28 @@ def test_a_diverged_resume_keeps_the_checkpoints_already_written(tiny_run, tmp_p
     before = {name: (run_dir / name).read_bytes() for name in ("latest.pt", "best.pt")}
     flags = [*TINY, "--save-every-steps", 1024, "--total-timesteps", 8192, "--learning-rate", 1e10, "--resume"]
     result = run_in_process("expert_ppo.py", *flags, "--output-dir", run_dir)
-    assert_usage_error(result, f"training diverged at step 5120 {DIVERGED}")
+    assert_usage_error(result, f"training diverged at step 5120{DIVERGED}")
     assert result.returncode == 2 and result.stdout.splitlines() == [f"resumed from {run_dir / 'latest.pt'} at step 4096"]
     assert {name: (run_dir / name).read_bytes() for name in before} == before
     assert sorted(path.name for path in run_dir.iterdir()) == ["best.pt", "latest.pt"]
 
+
+
+def test_a_resume_from_non_finite_weights_is_one_line(tiny_run, tmp_path):
+    """A latest.pt whose weights are NaN (saved by a diverged run before this was refused) ended a --resume in torch's
+    traceback at the first rollout; it is refused in one line that says to delete it, and is left as it was."""
+    run_dir = tmp_path / "run"
+    shutil.copytree(tiny_run[0], run_dir)
+    state = load(run_dir / "latest.pt")
+    for weights in state["agent"].values():
+        weights.fill_(float("nan"))
+    torch.save(state, run_dir / "latest.pt")
+    before = (run_dir / "latest.pt").read_bytes()
+    flags = [*TINY, "--total-timesteps", 8192, "--resume", "--output-dir", run_dir]
+    result = run_in_process("expert_ppo.py", *flags)
+    latest = run_dir / "latest.pt"
+    assert_usage_error(result, f"cannot resume from {latest}: its weights are not finite (a diverged run): delete it")
+    assert (run_dir / "latest.pt").read_bytes() == before
 
 # ----------------------------------------------------------------------------------------------
 # --frame-skip
