@@ -36,7 +36,6 @@ import json
 import os
 import signal
 import sys
-import warnings
 from dataclasses import asdict, dataclass
 from types import SimpleNamespace
 from typing import Optional
@@ -363,7 +362,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         steps = len(obs)
         raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
-        raise UsageError(f"{path}: {take} steps, not more than a batch: use a smaller --batch-size")
+        fix = "use a smaller --batch-size or more demos"
+        raise UsageError(f"{path}: {take} steps, not more than a batch: {fix}")
     obs = obs[:take]
     actions = actions[:take]
     starts = starts[:take]
@@ -381,6 +381,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: actions of rows {rows} lie outside {bounds}: rescale them")
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
+    if starts.all():
+        raise UsageError(f"{path}: every step starts an episode: pass episodes of 2 steps or more")
 
     # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
     # averaged: 0 if actions never change, 1 if copying is as good as the mean, 2 if unrelated.
@@ -408,10 +410,7 @@ def heldout_demos(args, env: gym.Env, frame_skip: Optional[int]) -> dict:
             env=args.env, demos=args.demos, num_demo_samples=None, batch_size=1, frame_skip=rate
         )
         try:
-            # One-step episodes have no copy error (numpy warns of a nan): run() refuses them.
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                return load_demos(given, env)[0]
+            return load_demos(given, env)[0]
         except UsageError as error:
             # The method files' fixes name their own flags: here the models set the env and the
             # rate, and a file of two steps or more will do.

@@ -264,6 +264,9 @@ def fit(args, policy, optimizer, train_step, num_samples: int, seed: int, device
         # The epoch's last minibatch loss; item() waits for the GPU, so train_time counts it all.
         last_loss = loss.item()
         train_time += time.time() - epoch_start
+        if not np.isfinite(last_loss):
+            diverged = f"seed {seed}: training diverged at epoch {epoch} (loss {last_loss})"
+            raise UsageError(f"{diverged}: use a smaller --learning-rate or --obs-noise-std")
         evaluating = epoch % args.eval_every == 0 or epoch == round_last_epoch
         if evaluating:
             policy.eval()
@@ -476,7 +479,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         steps = len(obs)
         raise UsageError(f"{path} holds {steps} steps: pass --num-demo-samples {steps} or fewer")
     if take <= args.batch_size:
-        raise UsageError(f"{path}: {take} steps, not more than a batch: use a smaller --batch-size")
+        fix = "use a smaller --batch-size or more demos"
+        raise UsageError(f"{path}: {take} steps, not more than a batch: {fix}")
     obs = obs[:take]
     actions = actions[:take]
     starts = starts[:take]
@@ -494,6 +498,8 @@ def load_demos(args, env: gym.Env) -> tuple:
         raise UsageError(f"{path}: actions of rows {rows} lie outside {bounds}: rescale them")
     if not starts[0]:
         raise UsageError(f"{path}: episode_starts[0] is False: it is True on each episode's start")
+    if starts.all():
+        raise UsageError(f"{path}: every step starts an episode: pass episodes of 2 steps or more")
 
     # The copycat shortcut's pull: MSE(a_{t-1}, a_t) within episodes over Var(a), per action entry,
     # averaged: 0 if actions never change, 1 if copying is as good as the mean, 2 if unrelated.
@@ -590,13 +596,13 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
     result["std"] = np.std(scores)
     seeds = "-".join(str(seed) for seed in per_seed)
     path = Path(output_dir, f"result_seeds{seeds}.json")
-    path.write_text(json.dumps(result, indent=1))
+    # Write a temporary file, then rename it: a reader never finds half a result.
+    Path(f"{path}.tmp").write_text(json.dumps(result, indent=1))
+    os.replace(f"{path}.tmp", path)
     return str(path)
 
 
 def start_worker():
-    # Ctrl-C reaches every process of the job; the main process alone handles it.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
 
@@ -656,11 +662,18 @@ def run(args):
             # spawn, not fork: torch and MuJoCo are not fork-safe.
             context = multiprocessing.get_context("spawn")
             pool = ProcessPoolExecutor(workers, context, initializer=start_worker)
+            # Ctrl-C reaches every process of the job, but only the main process should handle it:
+            # the workers start (in submit) while it is ignored, and they keep ignoring it.
+            handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
             futures = [pool.submit(train_and_record, *job) for job in jobs]
+            signal.signal(signal.SIGINT, handler)
             # Every seed runs to its end, even when another fails, before the results are read.
             wait(futures)
             entries = [future.result() for future in futures]
     except (KeyboardInterrupt, BrokenProcessPool) as error:
+        # A second Ctrl-C or `kill` must not break the clean exit below.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
         finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
         message = "no seed finished"

@@ -537,8 +537,7 @@ BAD_HELD_OUT = {
     # It said "holds one step".
     "no step": (demos_without_steps, "empty.npz holds no step: pass --demos of two steps or more"),
     # An IndexError in np.quantile, after two numpy warnings.
-    "one-step episodes": (demos_of_one_step_episodes,
-                          "seed4.npz: every step starts an episode, so none has a previous action: pass demos whose episodes last two steps or more"),
+    "one-step episodes": (demos_of_one_step_episodes, "seed4.npz: every step starts an episode: pass episodes of 2 steps or more"),
 }
 
 

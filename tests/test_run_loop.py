@@ -16,7 +16,7 @@ import pytest
 import torch
 
 import bc_oh
-from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_in_process, skip_evaluation, tiny_args
+from conftest import METHOD_FILES, REPO_ROOT, assert_usage_error, fake_demos, link_experts, run_in_process, run_script, skip_evaluation, tiny_args
 
 
 def live_processes(group: int) -> list:
@@ -32,13 +32,24 @@ def live_processes(group: int) -> list:
     return alive
 
 
+def pool_workers(group: int) -> list:
+    """The process pool's workers among a process group's live processes."""
+    workers = []
+    for pid in live_processes(group):
+        with contextlib.suppress(OSError):  # ended while we looked
+            if "spawn_main" in Path(f"/proc/{pid}/cmdline").read_text():
+                workers.append(pid)
+    return workers
+
+
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc (Linux)")
-@pytest.mark.parametrize("how", ["ctrl-c", "kill", "worker killed"])
+@pytest.mark.parametrize("how", ["ctrl-c", "kill", "worker killed", "ctrl-c while workers start", "ctrl-c twice"])
 def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_path, how):
     """Ctrl-C (SIGINT to the terminal's whole process group) or `kill PID` (SIGTERM to the main process only): one line
     on stderr, no traceback, and no process of the job left (the pool's workers and multiprocessing's helpers). A worker
     killed from outside (the out-of-memory killer; here `kill -9`) hung multiprocessing.Pool forever: now the job stops
-    its other workers and says so in one line, exit 1."""
+    its other workers and says so in one line, exit 1. A Ctrl-C while the workers import torch (before they could ignore
+    it) printed their tracebacks; a second Ctrl-C during the clean exit printed one of concurrent.futures' exit hook."""
     link_experts(tmp_path)
     command = [sys.executable, str(REPO_ROOT / "bc_oh.py"), "--seeds", "1", "2", "3", "--workers", "2", "--epochs", "20000",
                "--num-demo-samples", "300", "--eval-every", "1000", "--output-dir", str(tmp_path / "out")]
@@ -48,16 +59,31 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     started = set()
     for line in job.stdout:  # wait until both workers train: each prints "seed S | training" when it starts a seed
+        if how == "ctrl-c while workers start" and line.startswith("progress lines:"):
+            break  # the pool starts next
         if line.startswith("seed ") and line.rstrip().endswith("| training"):
             started.add(line)
         if len(started) == 2:
             break
-    if how == "ctrl-c":
+    if how == "ctrl-c while workers start":
+        deadline = time.time() + 30
+        while len(pool_workers(job.pid)) < 2 and time.time() < deadline:
+            time.sleep(0.01)
+        # Each worker ignores Ctrl-C from its first instruction (the old code ignored it only once torch was imported,
+        # and its workers' tracebacks raced with the main process's stopping them).
+        for pid in pool_workers(job.pid):
+            ignored = next(line for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("SigIgn:"))
+            assert int(ignored.split()[1], 16) & (1 << (signal.SIGINT - 1)), "a worker that takes Ctrl-C"
+        time.sleep(0.1)  # both workers are importing torch now (for a second or more)
+    if how.startswith("ctrl-c"):
         os.killpg(job.pid, signal.SIGINT)
-    elif how == "kill":
+    if how == "ctrl-c twice":
+        time.sleep(0.02)
+        os.killpg(job.pid, signal.SIGINT)
+    if how == "kill":
         job.send_signal(signal.SIGTERM)
-    else:
-        workers = [pid for pid in live_processes(job.pid) if "spawn_main" in Path(f"/proc/{pid}/cmdline").read_text()]
+    if how == "worker killed":
+        workers = pool_workers(job.pid)
         assert len(workers) == 2
         os.kill(workers[0], signal.SIGKILL)
     try:
@@ -268,3 +294,21 @@ def test_the_run_stops_its_own_workers_only_not_its_callers_child_processes(tmp_
         assert child.is_alive()
     finally:
         child.terminate()
+
+
+def test_a_seed_that_fails_lets_the_others_run_to_their_end(tmp_path):
+    """A seed that raises (a bug) ends the job with its traceback, but only after the other seeds have run to their end
+    and written their results: a first version of the process pool cancelled them (executor.map), and its cleanup then
+    killed the seeds in flight. A spawned worker does not see a test's monkeypatch, so seed 2 fails in a copy of
+    bc_oh.py here."""
+    link_experts(tmp_path)
+    source = (REPO_ROOT / "bc_oh.py").read_text()
+    seed_start = "    torch.manual_seed(seed)\n"
+    assert source.count(seed_start) == 1
+    failing = source.replace(seed_start, seed_start + "    if seed == 2:\n        raise RuntimeError('seed 2 fails')\n")
+    (tmp_path / "bc_oh_seed2_fails.py").write_text(failing)
+    result = run_script(tmp_path / "bc_oh_seed2_fails.py", "--seeds", 1, 2, 3, "--workers", 2, "--epochs", 2, "--eval-every", 1,
+                        "--eval-episodes", 2, "--num-demo-samples", 300, "--output-dir", "out", cwd=tmp_path)
+    assert result.returncode == 1 and "RuntimeError: seed 2 fails" in result.stderr
+    written = sorted(path.name for path in (tmp_path / "out").glob("*.json"))
+    assert written == ["result_seeds1.json", "result_seeds3.json"], "seeds 1 and 3 ran to their end, no combined result"

@@ -43,15 +43,15 @@ def test_the_files_users_copy_pass_ruff_check_with_no_line_over_100():
 
 
 CEILINGS = {
-    "bc_oh": 551,
-    "bc_so": 553,
-    "history_dropout": 563,
-    "c2f": 581,
-    "fca": 656,
-    "keyframe": 648,
-    "average_ensemble": 631,
-    "dagger": 707,
-    "c2f_table3": 680,
+    "bc_oh": 564,
+    "bc_so": 566,
+    "history_dropout": 576,
+    "c2f": 594,
+    "fca": 669,
+    "keyframe": 661,
+    "average_ensemble": 642,
+    "dagger": 720,
+    "c2f_table3": 693,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file

@@ -2,12 +2,13 @@
 (never a silently wrong run), a run writes into a folder of its own, each seed's result is written when the seed ends
 (an interrupted job keeps it), and the summary line says how good the score is."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import (REPO_ROOT, assert_usage_error, demo_file, fake_demos, link_experts, load_demos, make_demos, run_in_process, skip_evaluation,
-                      tiny_args)
+from conftest import (METHOD_FILES, REPO_ROOT, assert_usage_error, demo_file, fake_demos, link_experts, load_demos, make_demos, run_in_process,
+                      run_script, skip_evaluation, tiny_args)
 
 import bc_oh
 import c2f
@@ -28,6 +29,7 @@ def bad_demos(tmp_path):
     save_demos(tmp_path / "v4.npz", demos, {"env_id": "Hopper-v4", "frame_skip": 4})
     save_demos(tmp_path / "scaled.npz", {**demos, "actions": demos["actions"] * 5})
     save_demos(tmp_path / "dones.npz", {**demos, "episode_starts": np.roll(demos["episode_starts"], -1)})  # done flags, not starts
+    save_demos(tmp_path / "all_starts.npz", {**demos, "episode_starts": np.ones(200, dtype=bool)})  # every step its own episode
     np.savez(tmp_path / "objects.npz", observations=np.array([None] * 200, dtype=object), actions=demos["actions"],
              episode_starts=demos["episode_starts"])
 
@@ -39,7 +41,10 @@ CASES = {
     "done flags as starts": (["--demos", "dones.npz"], "dones.npz: episode_starts[0] is False: it is True on each episode's start"),
     "object arrays": (["--demos", "objects.npz"], "objects.npz is not a readable demo file (ValueError): see the format in docs/methods.md"),
     "more samples than the file": (["--demos", "v4.npz", "--num-demo-samples", 500], "v4.npz holds 200 steps: pass --num-demo-samples 200 or fewer"),
-    "a batch or fewer steps": (["--demos", "v4.npz", "--batch-size", 200], "v4.npz: 200 steps, not more than a batch: use a smaller --batch-size"),
+    "a batch or fewer steps": (["--demos", "v4.npz", "--batch-size", 200],
+                               "v4.npz: 200 steps, not more than a batch: use a smaller --batch-size or more demos"),
+    # no history at all (each frame repeated), and a copy error of nan with numpy's warnings
+    "starts at every step": (["--demos", "all_starts.npz"], "all_starts.npz: every step starts an episode: pass episodes of 2 steps or more"),
 }
 
 
@@ -51,6 +56,23 @@ def test_a_mistake_in_the_demos_is_refused_in_one_line(case, script, tmp_path, m
     args, message = CASES[case]
     result = run_in_process(script, *args, "--epochs", 1, "--eval-episodes", 1, "--seeds", 1)
     assert_usage_error(result, message)
+
+
+@pytest.mark.parametrize("script", METHOD_FILES)
+def test_a_diverged_training_is_refused_in_one_line(script, tmp_path, monkeypatch):
+    """An absurd learning rate gave `score nan` and exit 0 after every seed had trained; now the first epoch whose loss is
+    not finite stops the job in one line, exit 2, and no result of that seed is written."""
+    monkeypatch.chdir(link_experts(tmp_path))  # DAgger's expert labels its rounds
+    save_demos(tmp_path / "d.npz", fake_demos(200), {"env_id": "Hopper-v4", "frame_skip": 4})
+    flags = ["--demos", "d.npz", "--learning-rate", 1e30, "--epochs", 3, "--eval-episodes", 1, "--output-dir", "out"]
+    if script == "bc_oh.py":
+        # in worker processes: the error comes back to the main process, which prints it
+        result = run_script(script, *flags, "--seeds", 1, 2, "--workers", 2, cwd=tmp_path)
+    else:
+        result = run_in_process(script, *flags, "--seeds", 1)
+    assert_usage_error(result, "seed 1: training diverged at epoch 1 (")
+    assert result.stderr.rstrip().endswith("): use a smaller --learning-rate or --obs-noise-std")
+    assert result.returncode == 2 and not list((tmp_path / "out").glob("*.json")), "no result of a diverged seed"
 
 
 def test_actions_out_of_bounds_name_their_rows(tmp_path, monkeypatch):
@@ -145,6 +167,24 @@ def test_an_interrupted_job_keeps_each_seed_that_finished(tmp_path, monkeypatch,
     assert sorted(path.name for path in (tmp_path / "out").glob("*.json")) == ["result_seeds1.json"], "no combined result"
     first = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert first["args"]["seeds"] == [1] and list(first["scores"]) == ["1"] and first["scores"]["1"]["score"] == 7.0
+
+
+def test_a_result_file_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
+    """A seed's result is written to a temporary file, then renamed: a write cut short (a full disk, a kill) leaves the
+    previous result_seeds<S>.json as it was, where the old code left half a JSON file in its place."""
+    args = tiny_args(bc_oh, seeds=[1])
+    path = bc_oh.write_result(str(tmp_path), args, {1: {"score": 1.0, "evaluations": [[1, 1.0]], "ms_per_step": 0.1}})
+    before = Path(path).read_text()
+    real_write_text = Path.write_text
+
+    def cut_short(self, text, *args, **kwargs):
+        real_write_text(self, text[: len(text) // 2])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", cut_short)
+    with pytest.raises(OSError):
+        bc_oh.write_result(str(tmp_path), args, {1: {"score": 2.0, "evaluations": [[1, 2.0]], "ms_per_step": 0.1}})
+    assert Path(path).read_text() == before and json.loads(before)["scores"]["1"]["score"] == 1.0
 
 
 def test_the_summary_line_gives_the_share_of_the_experts_return(tmp_path, monkeypatch, capsys):
