@@ -32,6 +32,13 @@ def live_processes(group: int) -> list:
     return alive
 
 
+def ignores_ctrl_c(pid: int) -> bool:
+    """Whether the process ignores SIGINT (its SigIgn mask in /proc)."""
+    status = Path(f"/proc/{pid}/status").read_text().splitlines()
+    ignored = next(line for line in status if line.startswith("SigIgn:"))
+    return bool(int(ignored.split()[1], 16) & (1 << (signal.SIGINT - 1)))
+
+
 def pool_workers(group: int) -> list:
     """The process pool's workers among a process group's live processes."""
     workers = []
@@ -71,10 +78,10 @@ def test_an_interrupted_job_stops_all_its_processes_and_says_what_it_kept(tmp_pa
             time.sleep(0.01)
         # Each worker ignores Ctrl-C from its first instruction (the old code ignored it only once torch was imported,
         # and its workers' tracebacks raced with the main process's stopping them).
-        for pid in pool_workers(job.pid):
-            ignored = next(line for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("SigIgn:"))
-            assert int(ignored.split()[1], 16) & (1 << (signal.SIGINT - 1)), "a worker that takes Ctrl-C"
-        time.sleep(0.1)  # both workers are importing torch now (for a second or more)
+        assert all(ignores_ctrl_c(pid) for pid in pool_workers(job.pid)), "a worker that takes Ctrl-C"
+        while ignores_ctrl_c(job.pid) and time.time() < deadline:
+            time.sleep(0.01)  # the main process ignores it while it starts the workers
+        time.sleep(0.05)  # both workers are importing torch now (for a second or more)
     if how.startswith("ctrl-c"):
         os.killpg(job.pid, signal.SIGINT)
     if how == "ctrl-c twice":
