@@ -506,7 +506,9 @@ def write_result(output_dir: str, args, per_seed: dict) -> str:
     result["members"] = member_summary(per_seed)
     seeds = "-".join(str(seed) for seed in per_seed)
     path = Path(output_dir, f"result_seeds{seeds}.json")
-    path.write_text(json.dumps(result, indent=1))
+    # Write a temporary file, then rename it: a reader never finds half a result.
+    Path(f"{path}.tmp").write_text(json.dumps(result, indent=1))
+    os.replace(f"{path}.tmp", path)
     return str(path)
 
 
@@ -583,9 +585,6 @@ def run(args):
             wait(futures)
             entries = [future.result() for future in futures]
     except (KeyboardInterrupt, BrokenProcessPool) as error:
-        # A second Ctrl-C or `kill` must not break the clean exit below.
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
         finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
         message = "no seed finished"
@@ -640,3 +639,7 @@ if __name__ == "__main__":
         # Ctrl-C before the seeds start (while the env and demos load) or after they end.
         print("interrupted", file=sys.stderr)
         sys.exit(130)
+    finally:
+        # The job is over: a second Ctrl-C or `kill` must not break its exit (the pool's cleanup).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -671,9 +671,6 @@ def run(args):
             wait(futures)
             entries = [future.result() for future in futures]
     except (KeyboardInterrupt, BrokenProcessPool) as error:
-        # A second Ctrl-C or `kill` must not break the clean exit below.
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
         finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
         message = "no seed finished"
@@ -718,3 +715,7 @@ if __name__ == "__main__":
         # Ctrl-C before the seeds start (while the env and demos load) or after they end.
         print("interrupted", file=sys.stderr)
         sys.exit(130)
+    finally:
+        # The job is over: a second Ctrl-C or `kill` must not break its exit (the pool's cleanup).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)

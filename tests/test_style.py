@@ -43,15 +43,15 @@ def test_the_files_users_copy_pass_ruff_check_with_no_line_over_100():
 
 
 CEILINGS = {
-    "bc_oh": 564,
-    "bc_so": 566,
-    "history_dropout": 576,
-    "c2f": 594,
-    "fca": 669,
-    "keyframe": 661,
-    "average_ensemble": 642,
-    "dagger": 720,
-    "c2f_table3": 693,
+    "bc_oh": 565,
+    "bc_so": 567,
+    "history_dropout": 577,
+    "c2f": 595,
+    "fca": 670,
+    "keyframe": 662,
+    "average_ensemble": 645,
+    "dagger": 721,
+    "c2f_table3": 694,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file

@@ -2,6 +2,7 @@
 (never a silently wrong run), a run writes into a folder of its own, each seed's result is written when the seed ends
 (an interrupted job keeps it), and the summary line says how good the score is."""
 import json
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import torch
 from conftest import (METHOD_FILES, REPO_ROOT, assert_usage_error, demo_file, fake_demos, link_experts, load_demos, make_demos, run_in_process,
                       run_script, skip_evaluation, tiny_args)
 
+import average_ensemble
 import bc_oh
 import c2f
 import dagger
@@ -160,20 +162,26 @@ def test_an_interrupted_job_keeps_each_seed_that_finished(tmp_path, monkeypatch,
     extra = {}
     if module is dagger:
         extra = dict(dagger_samples=40, dagger_rounds=1, dagger_epochs=1)
+    handlers = (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM))
     with pytest.raises(SystemExit) as interrupted_run:
         module.run(tiny_args(module, demos="d.npz", learning_rate=None, seeds=[1, 2], output_dir="out", **extra))
     assert interrupted_run.value.code == 130
+    # A program (or notebook) that calls run() can still be interrupted: it left Ctrl-C and `kill` ignored.
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == handlers
     assert capsys.readouterr().err == "interrupted: seeds [1] finished, their results are in out\n"
     assert sorted(path.name for path in (tmp_path / "out").glob("*.json")) == ["result_seeds1.json"], "no combined result"
     first = json.loads((tmp_path / "out" / "result_seeds1.json").read_text())
     assert first["args"]["seeds"] == [1] and list(first["scores"]) == ["1"] and first["scores"]["1"]["score"] == 7.0
 
 
-def test_a_result_file_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
+@pytest.mark.parametrize("module", [bc_oh, average_ensemble], ids=lambda module: module.METHOD)
+def test_a_result_file_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch, module):
     """A seed's result is written to a temporary file, then renamed: a write cut short (a full disk, a kill) leaves the
-    previous result_seeds<S>.json as it was, where the old code left half a JSON file in its place."""
-    args = tiny_args(bc_oh, seeds=[1])
-    path = bc_oh.write_result(str(tmp_path), args, {1: {"score": 1.0, "evaluations": [[1, 1.0]], "ms_per_step": 0.1}})
+    previous result_seeds<S>.json as it was, where the old code left half a JSON file in its place. The other method
+    files copy bc_oh's write_result; the ensemble's has its own."""
+    members = {"members": {"bc_so": {"score": 1.0}, "bc_oh": {"score": 1.0}}}
+    args = tiny_args(module, seeds=[1])
+    path = module.write_result(str(tmp_path), args, {1: {"score": 1.0, "evaluations": [[1, 1.0]], "ms_per_step": 0.1, **members}})
     before = Path(path).read_text()
     real_write_text = Path.write_text
 
@@ -183,7 +191,7 @@ def test_a_result_file_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
 
     monkeypatch.setattr(Path, "write_text", cut_short)
     with pytest.raises(OSError):
-        bc_oh.write_result(str(tmp_path), args, {1: {"score": 2.0, "evaluations": [[1, 2.0]], "ms_per_step": 0.1}})
+        module.write_result(str(tmp_path), args, {1: {"score": 2.0, "evaluations": [[1, 2.0]], "ms_per_step": 0.1, **members}})
     assert Path(path).read_text() == before and json.loads(before)["scores"]["1"]["score"] == 1.0
 
 
