@@ -521,10 +521,51 @@ def member_summary(per_seed: dict) -> dict:
     return summary
 
 
-# Copied from bc_oh.start_worker
+# Copied from bc_oh.start_worker..train_seeds
 def start_worker():
     # One write per printed line, so that the lines of parallel seeds do not mix.
     sys.stdout.reconfigure(line_buffering=True, write_through=False)
+
+
+def train_seeds(args, demos: dict, output_dir: str) -> list:
+    """Train every seed, one process each (one after another with --workers 1 or --cuda); return
+    their entries. Ctrl-C, `kill` or a worker's death stops them all in one line."""
+    workers = min(args.workers or len(args.seeds), len(args.seeds))
+    if args.cuda:
+        workers = 1
+    jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
+    callers_children = set(multiprocessing.active_children())
+    try:
+        if workers == 1:
+            entries = [train_and_record(*job) for job in jobs]
+        else:
+            # spawn, not fork: torch and MuJoCo are not fork-safe.
+            context = multiprocessing.get_context("spawn")
+            pool = ProcessPoolExecutor(workers, context, initializer=start_worker)
+            # Ctrl-C reaches every process of the job, but only the main process should handle it:
+            # the workers start (in submit) while it is ignored, and they keep ignoring it.
+            handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            futures = [pool.submit(train_and_record, *job) for job in jobs]
+            signal.signal(signal.SIGINT, handler)
+            # Every seed runs to its end, even when another fails, before the results are read.
+            wait(futures)
+            entries = [future.result() for future in futures]
+    except (KeyboardInterrupt, BrokenProcessPool) as error:
+        # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
+        finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
+        message = "no seed finished"
+        if finished:
+            message = f"seeds {finished} finished, their results are in {output_dir}"
+        if isinstance(error, BrokenProcessPool):
+            print(f"a worker died (killed, out of memory or crashed): {message}", file=sys.stderr)
+            sys.exit(1)
+        print(f"interrupted: {message}", file=sys.stderr)
+        sys.exit(130)
+    finally:
+        # Stop the pool's workers at once (their own exit takes seconds), not the caller's children.
+        for worker in set(multiprocessing.active_children()) - callers_children:
+            worker.terminate()
+    return entries
 
 
 def run(args):
@@ -563,42 +604,8 @@ def run(args):
     if not os.access(output_dir, os.W_OK):
         raise UsageError(f"cannot write in {output_dir}: pass another --output-dir")
 
-    workers = min(args.workers or len(args.seeds), len(args.seeds))
-    if args.cuda:
-        workers = 1
     print(f"progress lines: loss = {LOSS}; last eval = mean return of the ensemble, then members")
-    jobs = [(args, demos, seed, output_dir) for seed in args.seeds]
-    callers_children = set(multiprocessing.active_children())
-    try:
-        if workers == 1:
-            entries = [train_and_record(*job) for job in jobs]
-        else:
-            # spawn, not fork: torch and MuJoCo are not fork-safe.
-            context = multiprocessing.get_context("spawn")
-            pool = ProcessPoolExecutor(workers, context, initializer=start_worker)
-            # Ctrl-C reaches every process of the job, but only the main process should handle it:
-            # the workers start (in submit) while it is ignored, and they keep ignoring it.
-            handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
-            futures = [pool.submit(train_and_record, *job) for job in jobs]
-            signal.signal(signal.SIGINT, handler)
-            # Every seed runs to its end, even when another fails, before the results are read.
-            wait(futures)
-            entries = [future.result() for future in futures]
-    except (KeyboardInterrupt, BrokenProcessPool) as error:
-        # Ctrl-C, `kill` or a killed worker (out of memory?): the finished seeds' results stay.
-        finished = [s for s in args.seeds if Path(output_dir, f"result_seeds{s}.json").exists()]
-        message = "no seed finished"
-        if finished:
-            message = f"seeds {finished} finished, their results are in {output_dir}"
-        if isinstance(error, BrokenProcessPool):
-            print(f"a worker died (killed, out of memory or crashed): {message}", file=sys.stderr)
-            sys.exit(1)
-        print(f"interrupted: {message}", file=sys.stderr)
-        sys.exit(130)
-    finally:
-        # Stop the pool's workers at once (their own exit takes seconds), not the caller's children.
-        for worker in set(multiprocessing.active_children()) - callers_children:
-            worker.terminate()
+    entries = train_seeds(args, demos, output_dir)
 
     per_seed = dict(zip(args.seeds, entries))
     result_path = write_result(output_dir, args, per_seed)

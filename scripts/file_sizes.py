@@ -53,7 +53,7 @@ ANCHORS = (
 """the two single-file anchors, measured in their own repositories (../shared/STYLE.md)"""
 
 PARTS = {
-    "run": ("run", "train_and_record", "write_result", "member_summary"),
+    "run": ("run", "train_seeds", "start_worker", "train_and_record", "write_result", "member_summary"),
     "errors": ("UsageError",),
     "evaluation": ("evaluate",),
     "env and partial observability": ("velocity_dims", "PartialObservation", "make_env"),

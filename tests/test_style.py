@@ -43,15 +43,15 @@ def test_the_files_users_copy_pass_ruff_check_with_no_line_over_100():
 
 
 CEILINGS = {
-    "bc_oh": 565,
-    "bc_so": 567,
-    "history_dropout": 577,
-    "c2f": 595,
-    "fca": 670,
-    "keyframe": 662,
-    "average_ensemble": 645,
-    "dagger": 721,
-    "c2f_table3": 694,
+    "bc_oh": 572,
+    "bc_so": 574,
+    "history_dropout": 584,
+    "c2f": 602,
+    "fca": 677,
+    "keyframe": 669,
+    "average_ensemble": 652,
+    "dagger": 728,
+    "c2f_table3": 701,
     "expert_ppo": 700,
 }
 """formatted lines at 100 columns of each file as it stands, written plainly (`git log -p` on this file
